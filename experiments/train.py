@@ -1,0 +1,38 @@
+r"""Train the self-supervised descriptor.
+
+    python -m experiments.train --config=configs/cpu_small.py --workdir=runs/small \
+        --config.data.path=../shared/data/kitti_object_velodyne
+
+Rerunning the same command resumes from the latest checkpoint in --workdir.
+"""
+
+from absl import app
+from absl import flags
+from absl import logging
+import jax
+from ml_collections import config_flags
+
+from ssd_jax import train
+from ssd_jax.logging_utils import quiet_libraries
+from ssd_jax.data import io, pipeline
+
+FLAGS = flags.FLAGS
+flags.DEFINE_string('workdir', None, 'Directory for checkpoints and metrics.jsonl.')
+config_flags.DEFINE_config_file('config', None, 'Training config file.', lock_config=True)
+flags.mark_flags_as_required(['config', 'workdir'])
+
+
+def main(argv):
+  if len(argv) > 1:
+    raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
+  quiet_libraries()
+  logging.info('JAX devices: %s', jax.devices())
+  try:
+    train.train_and_evaluate(FLAGS.config, FLAGS.workdir)
+  except (train.ConfigError, io.CloudFileError, pipeline.CloudDataError,
+          train.TrainingDiverged) as e:
+    raise SystemExit(f'error: {e}') from None
+
+
+if __name__ == '__main__':
+  app.run(main)

@@ -1,0 +1,1 @@
+"""Host-side point-cloud I/O and the training data pipeline."""

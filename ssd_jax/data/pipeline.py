@@ -1,0 +1,140 @@
+"""Host-side training data: clean, crop, subsample, batch and prefetch (numpy, seeded).
+
+Every batch is a pure function of (seed, step): the data-stream position is the
+step itself, so a resumed run sees exactly the batches an uninterrupted run
+would, with nothing extra to checkpoint.
+"""
+
+from __future__ import annotations
+
+import collections
+import concurrent.futures
+import functools
+import os
+from pathlib import Path
+from typing import Iterator, Sequence
+
+from absl import logging
+import numpy as np
+
+from ssd_jax.data import io
+
+
+class CloudDataError(ValueError):
+  """A cloud cannot be used for training (no points left, degenerate, ...)."""
+
+
+def clean_cloud(points: np.ndarray, name: str = 'cloud') -> np.ndarray:
+  """Drop rows with NaN/Inf coordinates; refuse empty or single-location clouds.
+
+  points [N, 3] -> [M, 3] float32, M <= N. Dropped rows are logged.
+  """
+  points = np.asarray(points, np.float32)
+  if points.ndim != 2 or points.shape[1] != 3:
+    raise CloudDataError(f'{name}: expected points of shape [N, 3], got {points.shape}')
+  finite = np.all(np.isfinite(points), axis=1)
+  if not finite.all():
+    logging.warning('%s: dropped %d of %d points with NaN/Inf coordinates', name,
+                    int((~finite).sum()), len(points))
+    points = points[finite]
+  if len(points) == 0:
+    raise CloudDataError(f'{name}: no finite points')
+  if np.all(np.ptp(points, axis=0) == 0):
+    raise CloudDataError(f'{name}: degenerate cloud, all {len(points)} points coincide '
+                         f'at {points[0].tolist()}')
+  return points
+
+
+def crop(points: np.ndarray, radius: float) -> np.ndarray:
+  """Keep points within `radius` metres of the sensor origin (3-D distance). [N, 3] -> [M, 3]."""
+  if radius <= 0:
+    return points
+  return points[np.einsum('ij,ij->i', points, points) < radius * radius]
+
+
+def subsample(rng: np.random.Generator, points: np.ndarray, num_points: int) -> np.ndarray:
+  """Exactly `num_points` rows: a random subset, or all points in random order plus
+  random repeats when fewer exist (REFERENCE §1). [M, 3] -> [num_points, 3]."""
+  m = len(points)
+  if m >= num_points:
+    idx = rng.choice(m, num_points, replace=False)
+  else:
+    idx = np.concatenate([rng.permutation(m), rng.integers(0, m, num_points - m)])
+  return points[idx]
+
+
+class CloudDataset:
+  """Training clouds from files, cleaned and cropped on first use (LRU cached).
+
+  Args:
+    files: cloud files.
+    fmt: `.bin` row layout ('auto', 'xyz', 'xyzi', 'xyzn').
+    crop_radius: metres, <= 0 to keep everything.
+    min_points: clouds with fewer points after cropping are an error.
+    cache_size: clouds kept in memory.
+  """
+
+  def __init__(self, files: Sequence[os.PathLike], fmt: str = 'auto', crop_radius: float = 20.0,
+               min_points: int = 1, cache_size: int = 512):
+    if not files:
+      raise CloudDataError('the dataset has no files')
+    self.files = [Path(f) for f in files]
+    self.fmt, self.crop_radius, self.min_points = fmt, crop_radius, min_points
+    self._load = functools.lru_cache(maxsize=cache_size)(self._load_uncached)
+
+  @classmethod
+  def from_source(cls, source: str | os.PathLike, **kwargs) -> 'CloudDataset':
+    """A directory, an Oxford `train.txt`, or a single file (see `io.list_clouds`)."""
+    return cls(io.list_clouds(source), **kwargs)
+
+  def __len__(self) -> int:
+    return len(self.files)
+
+  def _load_uncached(self, i: int) -> np.ndarray:
+    path = self.files[i]
+    pts = crop(clean_cloud(io.read_cloud(path, self.fmt), str(path)), self.crop_radius)
+    if len(pts) < max(self.min_points, 1):
+      raise CloudDataError(
+          f'{path}: {len(pts)} points within {self.crop_radius} m of the origin, fewer than '
+          f'the {self.min_points} required; is the cloud centred on its sensor?')
+    return pts
+
+  def cloud(self, i: int) -> np.ndarray:
+    """Cleaned, cropped cloud i: [M_i, 3] float32 metres."""
+    return self._load(i)
+
+  def batch(self, seed: int, step: int, batch_size: int, num_points: int) -> np.ndarray:
+    """The batch of `step`: [batch_size, num_points, 3] float32.
+
+    Clouds are visited in epochs, each a fresh permutation drawn from
+    (seed, epoch); subsampling draws from (seed, step).
+    """
+    n = len(self)
+    rng = np.random.default_rng((seed, step))
+    out = np.empty((batch_size, num_points, 3), np.float32)
+    for slot in range(batch_size):
+      epoch, pos = divmod(step * batch_size + slot, n)
+      order = np.random.default_rng((seed, 1_000_003, epoch)).permutation(n)
+      out[slot] = subsample(rng, self.cloud(int(order[pos])), num_points)
+    return out
+
+
+def prefetch(make_batch, steps: range, depth: int = 4, workers: int = 2) -> Iterator[np.ndarray]:
+  """Yield make_batch(step) for step in steps, computed ahead in worker threads.
+
+  File reads and numpy release the GIL, so `depth` batches are ready before
+  the jitted step asks for them. Order is preserved.
+  """
+  with concurrent.futures.ThreadPoolExecutor(workers, thread_name_prefix='prefetch') as pool:
+    pending = collections.deque()
+    it = iter(steps)
+    for step in it:
+      pending.append(pool.submit(make_batch, step))
+      if len(pending) >= depth:
+        break
+    while pending:
+      batch = pending.popleft().result()
+      nxt = next(it, None)
+      if nxt is not None:
+        pending.append(pool.submit(make_batch, nxt))
+      yield batch

@@ -1,0 +1,108 @@
+"""The 3DFeat-Net network body as Flax Linen modules (REFERENCE §1).
+
+The network is a pure function of explicit variables `{'params', 'batch_stats'}`
+and inputs: `FeatureNet().apply(variables, clusters, train=...)`.
+
+Shapes: clusters `[..., k, c, 3]`, unitless (relative to the center, divided by
+the ball radius). Outputs per cluster: descriptor `[..., k, D]` (unit norm),
+attention `[..., k]` (>= 0) and orientation `[..., k]` (radians about z).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+from ssd_jax import grouping
+
+DESCRIPTOR_DIMS = (16, 32, 64, 128)
+
+
+class MLP(nn.Module):
+  """Shared per-point / per-cluster MLP: Dense -> BatchNorm -> ReLU for each width."""
+  features: Sequence[int]
+  bn_momentum: float = 0.99
+
+  @nn.compact
+  def __call__(self, x: jax.Array, train: bool) -> jax.Array:
+    for width in self.features:
+      x = nn.Dense(width, use_bias=False)(x)
+      x = nn.BatchNorm(use_running_average=not train, momentum=self.bn_momentum,
+                       epsilon=1e-3)(x)
+      x = nn.relu(x)
+    return x
+
+
+class Detector(nn.Module):
+  """3DFeat-Net part 1: attention and z-orientation per cluster."""
+  bn_momentum: float = 0.99
+
+  @nn.compact
+  def __call__(self, clusters: jax.Array, train: bool) -> tuple[jax.Array, jax.Array]:
+    x = MLP((64, 128, 256), self.bn_momentum, name='point_mlp')(clusters, train)
+    x = jnp.max(x, axis=-2)  # max-pool over the c points of a cluster
+    x = MLP((128, 64), self.bn_momentum, name='cluster_mlp')(x, train)
+    attention = nn.softplus(nn.Dense(1, name='attention')(x))[..., 0]
+    xy = nn.Dense(2, name='orientation')(x)
+    # atan2 of the raw 2-vector equals atan2 of its L2-normalised version; the
+    # guard only keeps the gradient finite at the (measure-zero) origin.
+    both_zero = jnp.all(xy == 0, axis=-1)
+    angle = jnp.arctan2(xy[..., 1], jnp.where(both_zero, 1.0, xy[..., 0]))
+    return attention, angle
+
+
+class Descriptor(nn.Module):
+  """3DFeat-Net part 2: canonically oriented cluster -> L2-normalised descriptor."""
+  dim: int = 32
+  bn_momentum: float = 0.99
+
+  @nn.compact
+  def __call__(self, clusters: jax.Array, train: bool) -> jax.Array:
+    x = MLP((32, 64), self.bn_momentum, name='point_mlp1')(clusters, train)
+    pooled = jnp.max(x, axis=-2, keepdims=True)
+    x = jnp.concatenate([x, jnp.broadcast_to(pooled, x.shape)], -1)
+    width = 256 if self.dim > 64 else 128
+    x = MLP((width,), self.bn_momentum, name='point_mlp2')(x, train)
+    x = jnp.max(x, axis=-2)
+    x = nn.Dense(self.dim, name='out')(x)
+    return x * jax.lax.rsqrt(jnp.sum(x * x, -1, keepdims=True) + 1e-12)
+
+
+class FeatureNet(nn.Module):
+  """Detector + orientation + descriptor.
+
+  Attributes:
+    descriptor_dim: D in {16, 32, 64, 128}.
+    use_orientation: rotate each cluster by the predicted angle before the
+      descriptor (False: 3DFeat-Net's descriptor pre-training stage).
+  """
+  descriptor_dim: int = 32
+  use_orientation: bool = True
+  bn_momentum: float = 0.99
+
+  def setup(self):
+    if self.descriptor_dim not in DESCRIPTOR_DIMS:
+      raise ValueError(f'descriptor_dim must be one of {DESCRIPTOR_DIMS}, '
+                       f'got {self.descriptor_dim}')
+    self.detector = Detector(self.bn_momentum)
+    self.descriptor = Descriptor(self.descriptor_dim, self.bn_momentum)
+
+  def __call__(self, clusters: jax.Array, train: bool = False):
+    """clusters [..., k, c, 3] -> (descriptors [..., k, D], attention [..., k], angle [..., k])."""
+    if self.use_orientation:
+      attention, angle = self.detect(clusters, train)
+    else:  # descriptor-only: the detector is neither run nor created
+      angle = jnp.zeros(clusters.shape[:-2], clusters.dtype)
+      attention = jnp.ones_like(angle)
+    return self.describe(clusters, angle, train), attention, angle
+
+  def detect(self, clusters: jax.Array, train: bool = False):
+    """clusters [..., k, c, 3] -> (attention [..., k], orientation [..., k] radians)."""
+    return self.detector(clusters, train)
+
+  def describe(self, clusters: jax.Array, angle: jax.Array, train: bool = False) -> jax.Array:
+    """Descriptors of clusters [..., k, c, 3] seen in the frame rotated by angle [..., k]."""
+    return self.descriptor(grouping.rotate_clusters(clusters, angle), train)

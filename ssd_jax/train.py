@@ -1,0 +1,271 @@
+"""Self-supervised training: `create_train_state`, `train_step`, `train_and_evaluate`.
+
+The whole step - self-rotation, jitter, center sampling, grouping, both network
+branches, CF, loss, Adam update and BatchNorm statistics - is one `jax.jit`
+with the train state donated. The batch is sharded over all local devices
+along its first axis (data parallel); the state is replicated.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from typing import Any, Callable
+
+from absl import logging
+import flax
+from flax.training import train_state
+import jax
+import jax.numpy as jnp
+import ml_collections
+import numpy as np
+import optax
+from tqdm import auto as tqdm
+
+from ssd_jax import checkpoint, losses, network, objective
+from ssd_jax import grouping
+from ssd_jax.data import pipeline
+
+
+class ConfigError(ValueError):
+  """A config value is out of range or inconsistent."""
+
+
+class TrainingDiverged(FloatingPointError):
+  """The loss or the gradient became NaN/Inf."""
+
+
+class TrainState(train_state.TrainState):
+  """Params and Adam state (from flax) plus BatchNorm statistics and the PRNG key."""
+  batch_stats: Any = None
+  rng: jax.Array = None  # raw uint32 key data, so orbax can store it
+
+
+def check_config(config: ml_collections.ConfigDict, num_devices: int | None = None) -> None:
+  """Raise `ConfigError` naming the first bad value."""
+  m, t, d = config.model, config.train, config.data
+
+  def require(ok: bool, msg: str):
+    if not ok:
+      raise ConfigError(msg)
+
+  require(m.descriptor_dim in network.DESCRIPTOR_DIMS,
+          f'model.descriptor_dim must be one of {network.DESCRIPTOR_DIMS}, got {m.descriptor_dim}')
+  require(m.num_clusters >= 3, f'model.num_clusters must be >= 3, got {m.num_clusters}')
+  require(m.num_samples >= 1, f'model.num_samples must be >= 1, got {m.num_samples}')
+  require(m.radius > 0, f'model.radius must be > 0 metres, got {m.radius}')
+  require(m.alpha > 0, f'model.alpha must be > 0, got {m.alpha}')
+  require(m.loss in losses.ROTATION_LOSSES,
+          f'model.loss must be one of {losses.ROTATION_LOSSES}, got {m.loss!r}')
+  require(m.center_sampling in grouping.SAMPLERS,
+          f'model.center_sampling must be one of {grouping.SAMPLERS}, got {m.center_sampling!r}')
+  require(m.rotation_sigma >= 0, f'model.rotation_sigma must be >= 0, got {m.rotation_sigma}')
+  require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
+  require(d.num_points >= m.num_clusters,
+          f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '
+          'every cluster center is one of the input points')
+  require(t.batch_size >= 1, f'train.batch_size must be >= 1, got {t.batch_size}')
+  require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
+  require(t.num_steps >= 1, f'train.num_steps must be >= 1, got {t.num_steps}')
+  require(t.log_every >= 1 and t.checkpoint_every >= 1,
+          'train.log_every and train.checkpoint_every must be >= 1')
+  n = jax.local_device_count() if num_devices is None else num_devices
+  require(t.batch_size % n == 0,
+          f'train.batch_size ({t.batch_size}) must be divisible by the {n} local devices '
+          '(the batch is split across them)')
+
+
+def create_model(config: ml_collections.ConfigDict) -> network.FeatureNet:
+  return network.FeatureNet(descriptor_dim=config.model.descriptor_dim,
+                            bn_momentum=config.model.bn_momentum)
+
+
+def create_optimizer(config: ml_collections.ConfigDict) -> optax.GradientTransformation:
+  return optax.adam(config.train.learning_rate)
+
+
+def create_train_state(config: ml_collections.ConfigDict, key: jax.Array) -> TrainState:
+  """Randomly initialised state; `key` from `jax.random.key(seed)`."""
+  init_key, train_key = jax.random.split(key)
+  model = create_model(config)
+  dummy = jnp.zeros((1, config.model.num_clusters, config.model.num_samples, 3), jnp.float32)
+  variables = jax.jit(lambda k: model.init(k, dummy, train=False))(init_key)
+  return TrainState.create(apply_fn=model.apply, params=variables['params'],
+                           tx=create_optimizer(config), batch_stats=variables['batch_stats'],
+                           rng=jax.random.key_data(train_key))
+
+
+def train_step(state: TrainState, points: jax.Array, *, model: network.FeatureNet,
+               config: ml_collections.ConfigDict) -> tuple[TrainState, dict[str, jax.Array]]:
+  """One self-supervised Adam step on a batch of clouds [B, N, 3] metres.
+
+  A non-finite loss or gradient leaves params, optimizer and BatchNorm state
+  untouched (the step counter still advances) and reports `finite = False`.
+  """
+  key = jax.random.fold_in(jax.random.wrap_key_data(state.rng), state.step)
+  valid = jnp.ones(points.shape[:2], bool)
+
+  def loss_fn(params):
+    variables = {'params': params, 'batch_stats': state.batch_stats}
+    return objective.self_supervised_loss(model, variables, key, points, valid, config.model)
+
+  (loss, (metrics, batch_stats)), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.params)
+  grad_norm = optax.global_norm(grads)
+  finite = jnp.isfinite(loss) & jnp.isfinite(grad_norm)
+  updated = state.apply_gradients(grads=grads, batch_stats=batch_stats)
+  keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(finite, a, b), new, old)
+  new_state = updated.replace(params=keep(updated.params, state.params),
+                              opt_state=keep(updated.opt_state, state.opt_state),
+                              batch_stats=keep(updated.batch_stats, state.batch_stats))
+  return new_state, {**metrics, 'grad_norm': grad_norm, 'finite': finite}
+
+
+def eval_step(state: TrainState, points: jax.Array, key: jax.Array, *, model: network.FeatureNet,
+              config: ml_collections.ConfigDict) -> dict[str, jax.Array]:
+  """Loss and CF rotation error on held-out clouds with running BatchNorm statistics."""
+  variables = {'params': state.params, 'batch_stats': state.batch_stats}
+  valid = jnp.ones(points.shape[:2], bool)
+  _, (metrics, _) = objective.self_supervised_loss(model, variables, key, points, valid,
+                                                   config.model, train=False)
+  return metrics
+
+
+def make_mesh(devices=None) -> jax.sharding.Mesh:
+  """A 1-D data-parallel mesh over `devices` (default: all local devices)."""
+  devices = jax.local_devices() if devices is None else devices
+  return jax.sharding.Mesh(np.asarray(devices), ('data',))
+
+
+def jit_train_step(config: ml_collections.ConfigDict, mesh: jax.sharding.Mesh) -> Callable:
+  """`train_step` jitted for `mesh`: (state, points [B, N, 3]) -> (state, metrics).
+
+  The state is donated and replicated; points are split over the mesh's
+  'data' axis.
+  """
+  replicated = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+  batch = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec('data'))
+  step = lambda state, points: train_step(state, points, model=create_model(config),
+                                          config=config)
+  return jax.jit(step, in_shardings=(replicated, batch), out_shardings=replicated,
+                 donate_argnums=0)
+
+
+def replicate(tree: Any, mesh: jax.sharding.Mesh) -> Any:
+  sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+  return jax.device_put(tree, sharding)
+
+
+def shard_batch(points: np.ndarray, mesh: jax.sharding.Mesh) -> jax.Array:
+  sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec('data'))
+  return jax.device_put(points, sharding)
+
+
+class MetricsWriter:
+  """Appends one JSON object per logged step to `metrics.jsonl`.
+
+  On resume, lines logged after the restored step (by a run that was killed
+  before its next checkpoint) are dropped, so the file reads like one
+  uninterrupted run.
+  """
+
+  def __init__(self, path: str, resume_step: int):
+    self.path = path
+    if os.path.exists(path):
+      with open(path) as f:
+        kept = [line for line in f if line.strip() and json.loads(line)['step'] <= resume_step]
+      with open(path, 'w') as f:
+        f.writelines(kept)
+
+  def write(self, record: dict[str, Any]) -> None:
+    with open(self.path, 'a') as f:
+      f.write(json.dumps(record) + '\n')
+
+
+def _mean_metrics(pending: list[dict[str, Any]]) -> dict[str, float]:
+  host = jax.device_get(pending)
+  return {k: float(np.mean([m[k] for m in host])) for k in host[0] if k != 'finite'}
+
+
+def _check_finite(pending: list[tuple[int, dict]], ckpt: checkpoint.Checkpointer) -> None:
+  for step, m in pending:
+    if not bool(m['finite']):
+      last = ckpt.latest_step()
+      raise TrainingDiverged(
+          f'non-finite loss or gradient at step {step} (loss={float(m["loss"])}, '
+          f'grad_norm={float(m["grad_norm"])}); that update was skipped and training stopped. '
+          f'Last good checkpoint: '
+          + (f'step {last} in {ckpt.directory}' if last is not None else 'none yet'))
+
+
+def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> TrainState:
+  """Train (or resume) `config` in `workdir`; returns the final state.
+
+  Writes `workdir/metrics.jsonl` and `workdir/checkpoints/`. Rerunning with the
+  same workdir resumes from the latest checkpoint and continues the identical
+  run (same batches, same PRNG stream).
+  """
+  check_config(config)
+  if not config.data.path:
+    raise ConfigError('data.path is empty: point it at a directory of clouds, an Oxford '
+                      'train.txt or a cloud file (--config.data.path=...)')
+  os.makedirs(workdir, exist_ok=True)
+  t_cfg = config.train
+  dataset = pipeline.CloudDataset.from_source(
+      config.data.path, fmt=config.data.format, crop_radius=config.data.crop_radius,
+      min_points=config.data.min_points)
+  eval_points = None
+  if config.data.eval_path:
+    eval_set = pipeline.CloudDataset.from_source(
+        config.data.eval_path, fmt=config.data.format, crop_radius=config.data.crop_radius,
+        min_points=config.data.min_points)
+    eval_points = eval_set.batch(config.seed + 1, 0, t_cfg.batch_size, config.data.num_points)
+
+  mesh = make_mesh()
+  ckpt = checkpoint.Checkpointer(os.path.join(workdir, 'checkpoints'), t_cfg.checkpoint_every,
+                                 t_cfg.keep_checkpoints)
+  state = replicate(create_train_state(config, jax.random.key(config.seed)), mesh)
+  if ckpt.latest_step() is not None:
+    state, _ = ckpt.restore(checkpoint.abstract_like(state))
+    logging.info('Resumed from step %d in %s', int(state.step), ckpt.directory)
+  start = int(state.step)
+  writer = MetricsWriter(os.path.join(workdir, 'metrics.jsonl'), start)
+  step_fn = jit_train_step(config, mesh)
+  eval_fn = jax.jit(lambda s, p, k: eval_step(s, p, k, model=create_model(config), config=config))
+  eval_key = jax.random.key(config.seed + 2)
+
+  make_batch = lambda step: dataset.batch(config.seed, step, t_cfg.batch_size,
+                                          config.data.num_points)
+  batches = pipeline.prefetch(make_batch, range(start, t_cfg.num_steps), config.data.prefetch)
+  bar = tqdm.tqdm(total=t_cfg.num_steps, initial=start, desc='train', unit='step',
+                  dynamic_ncols=True, disable=not config.progress_bar)
+  pending: list[tuple[int, dict]] = []
+  t_last, steps_since = time.perf_counter(), 0
+  try:
+    for step, points in zip(range(start, t_cfg.num_steps), batches):
+      state, metrics = step_fn(state, shard_batch(points, mesh))
+      pending.append((step + 1, metrics))
+      steps_since += 1
+      bar.update(1)
+      done = step + 1 == t_cfg.num_steps
+      if (step + 1) % t_cfg.log_every == 0 or done or ckpt.should_save(step + 1):
+        pending = jax.device_get(pending)  # the only host transfer: at logging steps
+        _check_finite(pending, ckpt)
+        if (step + 1) % t_cfg.log_every == 0 or done:
+          now = time.perf_counter()
+          record = {'step': step + 1, **_mean_metrics([m for _, m in pending]),
+                    'steps_per_sec': steps_since / (now - t_last)}
+          if eval_points is not None and ((step + 1) % t_cfg.eval_every == 0 or done):
+            ev = jax.device_get(eval_fn(state, jnp.asarray(eval_points), eval_key))
+            record.update({f'eval_{k}': float(v) for k, v in ev.items()})
+          writer.write(record)
+          bar.set_postfix(loss=f"{record['loss']:.4f}",
+                          rot_err=f"{record['rotation_error_deg']:.2f}deg",
+                          sps=f"{record['steps_per_sec']:.2f}")
+          t_last, steps_since, pending = time.perf_counter(), 0, []
+        ckpt.save(step + 1, state, config, force=done)
+  finally:
+    bar.close()
+    ckpt.wait_until_finished()
+  ckpt.close()
+  return state
