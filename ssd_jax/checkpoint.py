@@ -21,9 +21,10 @@ class Checkpointer:
 
   def __init__(self, directory: str | os.PathLike, every: int = 1000, keep: int = 3,
                asynchronous: bool = True):
+    self.every = every
+    # The save rule lives in `should_save`; orbax only keeps the newest `keep`.
     options = ocp.CheckpointManagerOptions(
-        max_to_keep=keep, save_interval_steps=every, create=True,
-        enable_async_checkpointing=asynchronous)
+        max_to_keep=keep, create=True, enable_async_checkpointing=asynchronous)
     self._manager = ocp.CheckpointManager(os.path.abspath(directory), options=options,
                                           item_names=('state', 'config'))
 
@@ -35,15 +36,18 @@ class Checkpointer:
     return self._manager.latest_step()
 
   def should_save(self, step: int) -> bool:
-    return self._manager.should_save(step)
+    """Checkpoints are taken at every multiple of `every` steps."""
+    return step % self.every == 0
 
   def save(self, step: int, state: Any, config: ml_collections.ConfigDict,
            force: bool = False) -> bool:
     """Save (asynchronously) if `step` is a save step or `force`; True if saved."""
+    if not (force or self.should_save(step)) or step == self.latest_step():
+      return False
     return self._manager.save(
         step, args=ocp.args.Composite(state=ocp.args.StandardSave(state),
                                       config=ocp.args.JsonSave(config.to_dict())),
-        force=force)
+        force=True)
 
   def restore(self, abstract_state: Any, step: int | None = None) -> tuple[Any, dict]:
     """Restore `step` (default latest) into the structure, shapes, dtypes and

@@ -15,7 +15,6 @@ from typing import Any, Callable
 
 from absl import logging
 import flax
-from flax.training import train_state
 import jax
 import jax.numpy as jnp
 import ml_collections
@@ -36,10 +35,19 @@ class TrainingDiverged(FloatingPointError):
   """The loss or the gradient became NaN/Inf."""
 
 
-class TrainState(train_state.TrainState):
-  """Params and Adam state (from flax) plus BatchNorm statistics and the PRNG key."""
-  batch_stats: Any = None
-  rng: jax.Array = None  # raw uint32 key data, so orbax can store it
+@flax.struct.dataclass
+class TrainState:
+  """Everything a run needs to continue, and nothing static.
+
+  Pure data (no optimizer or apply function inside), so every state - fresh,
+  restored or returned by the step - has the same pytree structure and the
+  jitted step never retraces.
+  """
+  step: jax.Array         # int32 []
+  params: Any
+  batch_stats: Any        # BatchNorm running statistics
+  opt_state: Any          # Adam moments
+  rng: jax.Array          # raw uint32 key data, so orbax can store it
 
 
 def check_config(config: ml_collections.ConfigDict, num_devices: int | None = None) -> None:
@@ -91,9 +99,11 @@ def create_train_state(config: ml_collections.ConfigDict, key: jax.Array) -> Tra
   model = create_model(config)
   dummy = jnp.zeros((1, config.model.num_clusters, config.model.num_samples, 3), jnp.float32)
   variables = jax.jit(lambda k: model.init(k, dummy, train=False))(init_key)
-  return TrainState.create(apply_fn=model.apply, params=variables['params'],
-                           tx=create_optimizer(config), batch_stats=variables['batch_stats'],
-                           rng=jax.random.key_data(train_key))
+  params = variables['params']
+  return TrainState(step=jnp.zeros((), jnp.int32), params=params,
+                    batch_stats=variables['batch_stats'],
+                    opt_state=create_optimizer(config).init(params),
+                    rng=jax.random.key_data(train_key))
 
 
 def train_step(state: TrainState, points: jax.Array, *, model: network.FeatureNet,
@@ -111,13 +121,14 @@ def train_step(state: TrainState, points: jax.Array, *, model: network.FeatureNe
     return objective.self_supervised_loss(model, variables, key, points, valid, config.model)
 
   (loss, (metrics, batch_stats)), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.params)
-  grad_norm = optax.global_norm(grads)
+  grad_norm = optax.tree.norm(grads)
   finite = jnp.isfinite(loss) & jnp.isfinite(grad_norm)
-  updated = state.apply_gradients(grads=grads, batch_stats=batch_stats)
+  updates, opt_state = create_optimizer(config).update(grads, state.opt_state, state.params)
+  params = optax.apply_updates(state.params, updates)
   keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(finite, a, b), new, old)
-  new_state = updated.replace(params=keep(updated.params, state.params),
-                              opt_state=keep(updated.opt_state, state.opt_state),
-                              batch_stats=keep(updated.batch_stats, state.batch_stats))
+  new_state = state.replace(step=state.step + 1, params=keep(params, state.params),
+                            opt_state=keep(opt_state, state.opt_state),
+                            batch_stats=keep(batch_stats, state.batch_stats))
   return new_state, {**metrics, 'grad_norm': grad_norm, 'finite': finite}
 
 

@@ -1,0 +1,35 @@
+"""Shared fixtures: the real scans beside the project and a tiny training config."""
+
+import os
+from pathlib import Path
+
+import pytest
+
+from configs import cpu_small
+
+SHARED_DATA = Path(os.environ.get('SSD_JAX_SHARED_DATA',
+                                  Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data'))
+
+
+def shared_path(*parts) -> Path:
+  path = SHARED_DATA.joinpath(*parts)
+  if not path.exists():
+    pytest.skip(f'real data not found at {path} (set SSD_JAX_SHARED_DATA)')
+  return path
+
+
+@pytest.fixture
+def tiny_config():
+  """cpu_small shrunk so one jitted step takes well under a second on 2 cores."""
+  config = cpu_small.get_config()
+  config.progress_bar = False
+  config.data.num_points = 512
+  config.data.min_points = 16
+  config.model.num_clusters = 64
+  config.model.num_samples = 16
+  config.train.batch_size = 2
+  config.train.num_steps = 4
+  config.train.log_every = 2
+  config.train.checkpoint_every = 2
+  config.train.eval_every = 2
+  return config

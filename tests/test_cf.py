@@ -1,0 +1,125 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ssd_jax import cf, geometry, losses
+
+
+def _unit(x):
+  return x / np.linalg.norm(x, axis=-1, keepdims=True)
+
+
+def _known_problem(seed=0, k=512, d=32):
+  rng = np.random.default_rng(seed)
+  p = rng.uniform(-20, 20, (k, 3)).astype(np.float32)
+  r = np.asarray(geometry.random_so3(jax.random.key(seed)))
+  t = np.array([3.0, -1.5, 0.7], np.float32)
+  perm = rng.permutation(k)
+  q = (p @ r.T + t)[perm]
+  f = _unit(rng.normal(size=(k, d))).astype(np.float32)
+  return p, q, f, f[perm], r, t
+
+
+def test_cf_recovers_known_transform_among_all_pairs():
+  p, q, fp, fq, r, t = _known_problem()
+  # alpha 0.01: every wrong pair weighs < exp(-50) of a true pair (random 32-D unit vectors).
+  r_est, t_est = jax.jit(cf.cf_solve, static_argnums=4)(p, q, fp, fq, 0.01)
+  np.testing.assert_allclose(r_est, r, atol=2e-5)
+  np.testing.assert_allclose(t_est, t, atol=2e-4)
+
+
+def test_cf_is_reflection_safe():
+  # Points on a plane z = 0 mirrored through it: the best orthogonal fit of
+  # mirrored 3-D data is a reflection; cf must still return a rotation.
+  rng = np.random.default_rng(1)
+  p = rng.normal(size=(50, 3)).astype(np.float32)
+  q = p * np.array([1, 1, -1], np.float32)
+  f = _unit(rng.normal(size=(50, 16))).astype(np.float32)
+  r_est, _ = cf.cf_solve(p, q, f, f, 0.01)
+  assert float(jnp.linalg.det(r_est)) == pytest.approx(1.0, abs=1e-5)
+  np.testing.assert_allclose(r_est @ r_est.T, np.eye(3), atol=1e-5)
+
+
+def test_cf_gradient_matches_finite_differences():
+  rng = np.random.default_rng(2)
+  k = 24
+  p = rng.uniform(-5, 5, (k, 3))
+  r_gt = np.asarray(geometry.random_so3(jax.random.key(5)), np.float64)
+  q = p @ r_gt.T + 0.3 * rng.normal(size=(k, 3))
+  fp = _unit(rng.normal(size=(k, 8)))
+  fq = _unit(fp + 0.3 * rng.normal(size=(k, 8)))
+  with jax.enable_x64(True):
+    args = [jnp.asarray(a, jnp.float64) for a in (p, q, fp, fq, r_gt)]
+
+    def loss(fp, fq):
+      r, t = cf.cf_solve(args[0], args[1], fp, fq, 0.5)
+      return losses.rotation_loss(r, args[4]) + 0.1 * jnp.sum(t ** 2)
+
+    grads = jax.grad(loss, argnums=(0, 1))(args[2], args[3])
+    eps = 1e-6
+    for which in (0, 1):
+      for (i, j) in [(0, 0), (5, 3), (k - 1, 7)]:
+        plus, minus = [list(args[2:4]), list(args[2:4])]
+        plus[which] = plus[which].at[i, j].add(eps)
+        minus[which] = minus[which].at[i, j].add(-eps)
+        fd = (loss(*plus) - loss(*minus)) / (2 * eps)
+        assert float(grads[which][i, j]) == pytest.approx(float(fd), rel=1e-4, abs=1e-8)
+
+
+@pytest.mark.parametrize('geometry_kind', ['planar', 'collinear', 'coincident', 'symmetric'])
+def test_cf_gradients_finite_on_degenerate_geometry(geometry_kind):
+  rng = np.random.default_rng(3)
+  k = 64
+  base = rng.normal(size=(k, 3)).astype(np.float32)
+  if geometry_kind == 'planar':
+    p = base * np.array([5, 5, 0], np.float32)
+  elif geometry_kind == 'collinear':
+    p = np.outer(rng.normal(size=k), [1.0, 2.0, 0.5]).astype(np.float32)
+  elif geometry_kind == 'coincident':
+    p = np.ones((k, 3), np.float32)
+  else:  # equal singular values: points on the corners of a cube
+    p = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)] * 8, np.float32)
+  r_gt = geometry.rotation_z(jnp.float32(0.4))
+  q = p @ np.asarray(r_gt).T
+  feats = jnp.asarray(_unit(rng.normal(size=(k, 32))), jnp.float32)
+
+  def loss(fp, fq):
+    r, t = cf.cf_solve(p, q, fp, fq, 1.0)
+    return losses.rotation_loss(r, r_gt) + jnp.sum(t)
+
+  value, grads = jax.value_and_grad(loss, argnums=(0, 1))(feats, feats + 0.01)
+  assert np.isfinite(float(value))
+  assert all(np.isfinite(np.asarray(g)).all() for g in grads)
+
+
+def test_cf_masks_exclude_clusters():
+  p, q, fp, fq, r, t = _known_problem(k=64)
+  q_bad = q.copy()
+  mask_q = np.ones(64, bool)
+  mask_q[:10] = False
+  q_bad[:10] = 1e3  # garbage where masked
+  r_est, t_est = cf.cf_solve(p, q_bad, fp, fq, 0.01, None, jnp.asarray(mask_q))
+  np.testing.assert_allclose(r_est, r, atol=1e-4)
+  r_none, t_none = cf.cf_solve(p, q, fp, fq, 1.0, jnp.zeros(64, bool), None)
+  assert np.isfinite(np.asarray(r_none)).all() and np.isfinite(np.asarray(t_none)).all()
+
+
+def test_cf_weights_do_not_underflow_for_small_alpha():
+  rng = np.random.default_rng(4)
+  f = _unit(rng.normal(size=(8, 4))).astype(np.float32)
+  w = cf.descriptor_weights(f, -f, 1e-4)  # every pair far apart
+  assert float(jnp.sum(w)) == pytest.approx(1.0, abs=1e-5) and bool(jnp.isfinite(w).all())
+
+
+def test_rotation_loss_values_and_gradient_at_identity():
+  theta = 0.3
+  r = geometry.rotation_z(jnp.float32(theta))
+  assert float(losses.rotation_loss(r, jnp.eye(3))) == pytest.approx(
+      2 * np.sqrt(1 - np.cos(theta)), rel=1e-5)
+  assert float(losses.rotation_loss(r, jnp.eye(3), 'squared_frobenius')) == pytest.approx(
+      4 * (1 - np.cos(theta)), rel=1e-4)
+  g = jax.grad(lambda a: losses.rotation_loss(geometry.rotation_z(a), jnp.eye(3)))(0.0)
+  assert np.isfinite(float(g))
+  with pytest.raises(ValueError, match='rotation loss must be one of'):
+    losses.rotation_loss(r, r, 'l1')

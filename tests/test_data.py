@@ -1,0 +1,127 @@
+import numpy as np
+import open3d as o3d
+import pytest
+
+from ssd_jax.data import io, pipeline
+from tests.conftest import shared_path
+
+
+def test_reads_real_3dfeatnet_and_kitti_formats():
+  oxford = shared_path('example', 'oxford_270.bin')
+  kitti = shared_path('kitti_object_velodyne', '000000.bin')
+  assert io.detect_bin_format(np.fromfile(oxford, '<f4'), oxford) == 'xyzn'
+  assert io.detect_bin_format(np.fromfile(kitti, '<f4'), kitti) == 'xyzi'
+  pts = io.read_cloud(oxford)
+  assert pts.shape == (16384, 3) and pts.dtype == np.float32
+  raw = np.fromfile(kitti, '<f4').reshape(-1, 4)
+  np.testing.assert_array_equal(io.read_cloud(kitti), raw[:, :3])
+
+
+def test_plain_xyz_npy_ply_pcd(tmp_path):
+  pts = np.random.default_rng(0).normal(size=(101, 3)).astype(np.float32)
+  pts.tofile(tmp_path / 'a.bin')
+  np.testing.assert_array_equal(io.read_cloud(tmp_path / 'a.bin', 'xyz'), pts)
+  np.save(tmp_path / 'a.npy', pts)
+  np.testing.assert_array_equal(io.read_cloud(tmp_path / 'a.npy'), pts)
+  pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts.astype(np.float64)))
+  for suffix in ('.ply', '.pcd'):
+    o3d.io.write_point_cloud(str(tmp_path / f'a{suffix}'), pcd)
+    np.testing.assert_allclose(io.read_cloud(tmp_path / f'a{suffix}'), pts, atol=1e-6)
+
+
+@pytest.mark.parametrize('content, fmt, message', [
+    (b'', 'auto', 'file is empty'),
+    (b'\0' * 10, 'auto', 'not a whole number of float32 values'),
+    (np.zeros(7, '<f4').tobytes(), 'auto', 'rows of width 3, 4 or 6'),
+    (np.zeros(8, '<f4').tobytes(), 'xyzn', "6-column float32 rows .format 'xyzn'"),
+    (np.zeros(6, '<f4').tobytes(), 'xyzrgb', 'unknown .bin format'),
+])
+def test_bad_bin_files_are_clear_errors(tmp_path, content, fmt, message):
+  path = tmp_path / 'bad.bin'
+  path.write_bytes(content)
+  with pytest.raises(io.CloudFileError, match=message):
+    io.read_cloud(path, fmt)
+
+
+def test_truncated_real_file_is_reported(tmp_path):
+  data = shared_path('example', 'oxford_270.bin').read_bytes()
+  (tmp_path / 'cut.bin').write_bytes(data[:-4])
+  with pytest.raises(io.CloudFileError, match='truncated'):
+    io.read_cloud(tmp_path / 'cut.bin', 'xyzn')
+
+
+def test_missing_and_unsupported_files(tmp_path):
+  with pytest.raises(io.CloudFileError, match='no such file'):
+    io.read_cloud(tmp_path / 'nope.bin')
+  (tmp_path / 'x.las').write_bytes(b'1234')
+  with pytest.raises(io.CloudFileError, match='unsupported file type'):
+    io.read_cloud(tmp_path / 'x.las')
+  np.save(tmp_path / 'two.npy', np.zeros((5, 2)))
+  with pytest.raises(io.CloudFileError, match=r'expected an \[N, >=3\] array'):
+    io.read_cloud(tmp_path / 'two.npy')
+  (tmp_path / 'empty.ply').write_bytes(b'')
+  with pytest.raises(io.CloudFileError, match='empty'):
+    io.read_cloud(tmp_path / 'empty.ply')
+  (tmp_path / 'dir').mkdir()
+  with pytest.raises(io.CloudFileError, match='holds no point clouds'):
+    io.list_clouds(tmp_path / 'dir')
+
+
+def test_nan_points_are_dropped_and_all_nan_or_coincident_refused():
+  pts = np.random.default_rng(1).normal(size=(50, 3)).astype(np.float32)
+  pts[3] = np.nan
+  pts[7, 1] = np.inf
+  cleaned = pipeline.clean_cloud(pts, 'c')
+  assert cleaned.shape == (48, 3) and np.isfinite(cleaned).all()
+  with pytest.raises(pipeline.CloudDataError, match='no finite points'):
+    pipeline.clean_cloud(np.full((4, 3), np.nan), 'c')
+  with pytest.raises(pipeline.CloudDataError, match='all 9 points coincide'):
+    pipeline.clean_cloud(np.ones((9, 3)), 'c')
+  with pytest.raises(pipeline.CloudDataError, match=r'shape \[N, 3\]'):
+    pipeline.clean_cloud(np.ones((9, 4)), 'c')
+
+
+def test_oxford_index_and_listing(tmp_path):
+  for i in range(3):
+    np.random.default_rng(i).normal(size=(20, 6)).astype(np.float32).tofile(tmp_path / f'{i}.bin')
+  (tmp_path / 'train.txt').write_text('0.bin | 1 2 | 1 2\n1.bin | 0 | 0 2\n2.bin |  | 0\n')
+  entries = io.read_oxford_index(tmp_path / 'train.txt')
+  assert [e.path.name for e in entries] == ['0.bin', '1.bin', '2.bin']
+  assert entries[0].positives == (1, 2) and entries[2].positives == () and entries[1].non_negatives == (0, 2)
+  assert io.list_clouds(tmp_path) == [e.path for e in entries]
+  (tmp_path / 'bad.txt').write_text('0.bin | 1 x | 2\n')
+  with pytest.raises(io.CloudFileError, match='indices must be integers'):
+    io.read_oxford_index(tmp_path / 'bad.txt')
+
+
+def test_crop_and_subsample_pad_by_repetition():
+  pts = np.array([[1.0, 0, 0], [0, 30, 0], [5, 5, 1], [0, 0, 19.9]], np.float32)
+  assert len(pipeline.crop(pts, 20.0)) == 3
+  rng = np.random.default_rng(0)
+  few = np.random.default_rng(2).normal(size=(10, 3)).astype(np.float32)
+  out = pipeline.subsample(rng, few, 64)
+  assert out.shape == (64, 3)
+  assert {tuple(r) for r in out} == {tuple(r) for r in few}  # every point, then repeats
+  many = pipeline.subsample(rng, np.arange(300, dtype=np.float32).reshape(100, 3), 40)
+  assert len({tuple(r) for r in many}) == 40
+
+
+def test_dataset_batches_are_a_function_of_seed_and_step():
+  ds = pipeline.CloudDataset.from_source(shared_path('kitti_object_velodyne'))
+  assert len(ds) == 6
+  a = ds.batch(0, 5, 3, 256)
+  np.testing.assert_array_equal(a, ds.batch(0, 5, 3, 256))
+  assert not np.array_equal(a, ds.batch(0, 6, 3, 256))
+  assert not np.array_equal(a, ds.batch(1, 5, 3, 256))
+  assert np.linalg.norm(a, axis=-1).max() < 20.0  # cropped
+
+
+def test_dataset_refuses_clouds_far_from_their_sensor(tmp_path):
+  (np.random.default_rng(0).normal(size=(100, 3)) + 500).astype(np.float32).tofile(tmp_path / 'a.bin')
+  ds = pipeline.CloudDataset([tmp_path / 'a.bin'], fmt='xyz', min_points=10)
+  with pytest.raises(pipeline.CloudDataError, match='0 points within 20.0 m'):
+    ds.cloud(0)
+
+
+def test_prefetch_preserves_order():
+  assert list(pipeline.prefetch(lambda s: s * s, range(3, 12), depth=3)) == [s * s for s in range(3, 12)]

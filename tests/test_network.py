@@ -1,0 +1,55 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ssd_jax import geometry, grouping, network
+
+
+def _clusters_of(points, centers, radius=2.0, c=32):
+  idx, has = grouping.ball_query(points, centers, radius, c)
+  return grouping.group_points(points, centers, idx, has, radius)
+
+
+@pytest.mark.parametrize('dim', network.DESCRIPTOR_DIMS)
+def test_feature_net_shapes_and_unit_descriptors(dim):
+  clusters = jax.random.uniform(jax.random.key(0), (2, 8, 16, 3), minval=-1, maxval=1)
+  model = network.FeatureNet(descriptor_dim=dim)
+  variables = model.init(jax.random.key(1), clusters)
+  desc, att, angle = model.apply(variables, clusters)
+  assert desc.shape == (2, 8, dim) and att.shape == (2, 8) and angle.shape == (2, 8)
+  np.testing.assert_allclose(jnp.linalg.norm(desc, axis=-1), 1.0, atol=1e-5)
+  assert bool((att >= 0).all())
+  hidden = variables['params']['descriptor']['point_mlp2']['Dense_0']['kernel'].shape[-1]
+  assert hidden == (256 if dim > 64 else 128)
+
+
+def test_bad_descriptor_dim_is_a_clear_error():
+  with pytest.raises(ValueError, match='descriptor_dim must be one of'):
+    network.FeatureNet(descriptor_dim=20).init(jax.random.key(0), jnp.zeros((1, 4, 8, 3)))
+
+
+def test_descriptors_invariant_to_z_rotation_with_shifted_orientation():
+  rng = np.random.default_rng(0)
+  cloud = jnp.asarray(rng.uniform(-6, 6, (1500, 3)) * np.array([1, 1, 0.3]), jnp.float32)
+  centers = cloud[:32]
+  model = network.FeatureNet(descriptor_dim=32)
+  clusters = _clusters_of(cloud, centers)
+  variables = model.init(jax.random.key(0), clusters)
+  _, _, angle = model.apply(variables, clusters)
+
+  theta = 0.7
+  rot = geometry.rotation_z(jnp.float32(theta))
+  clusters_rot = _clusters_of(cloud @ rot.T, centers @ rot.T)
+  describe = lambda c, a: model.apply(variables, c, a, method=network.FeatureNet.describe)
+  d_ref = describe(clusters, angle)
+  d_rot = describe(clusters_rot, angle + theta)
+  np.testing.assert_allclose(d_rot, d_ref, atol=2e-5)
+  # ... and a rotated cloud with unshifted angles does change them (the test can fail).
+  assert float(jnp.max(jnp.abs(describe(clusters_rot, angle) - d_ref))) > 1e-2
+
+
+def test_descriptor_only_mode_has_no_detector():
+  model = network.FeatureNet(use_orientation=False)
+  variables = model.init(jax.random.key(0), jnp.zeros((1, 4, 8, 3)))
+  assert set(variables['params']) == {'descriptor'}

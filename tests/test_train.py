@@ -1,0 +1,220 @@
+import functools
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ssd_jax import train
+from ssd_jax.data import pipeline
+from tests.conftest import shared_path
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _batch(config, seed=0, n_distinct=None):
+  rng = np.random.default_rng(seed)
+  n = config.data.num_points
+  pts = rng.uniform(-8, 8, (config.train.batch_size, n, 3)) * np.array([1, 1, 0.25])
+  if n_distinct is not None:  # few real points, padded by repetition as the pipeline does
+    pts = pts[:, rng.integers(0, n_distinct, n)]
+  return jnp.asarray(pts, jnp.float32)
+
+
+def _step_fn(config, max_traces=None):
+  model = train.create_model(config)
+  fn = lambda state, points: train.train_step(state, points, model=model, config=config)
+  if max_traces is not None:
+    fn = chex.assert_max_traces(fn, n=max_traces)
+  return jax.jit(fn, donate_argnums=0)
+
+
+def test_train_step_compiles_once_and_is_deterministic(tiny_config):
+  chex.clear_trace_counter()
+  step = _step_fn(tiny_config, max_traces=1)
+  runs = []
+  for _ in range(2):
+    state = train.create_train_state(tiny_config, jax.random.key(0))
+    for i in range(3):
+      state, metrics = step(state, _batch(tiny_config, i))
+    runs.append(jax.device_get(state.params))
+  assert int(state.step) == 3 and bool(metrics['finite'])
+  chex.assert_trees_all_equal(*runs)  # same seed, same result, bitwise
+  other = train.create_train_state(tiny_config, jax.random.key(1))
+  assert not np.array_equal(jax.tree.leaves(other.params)[0], jax.tree.leaves(runs[0])[0])
+
+
+def test_nan_batch_skips_the_update(tiny_config):
+  step = _step_fn(tiny_config)
+  state = train.create_train_state(tiny_config, jax.random.key(0))
+  before = jax.device_get(state.params)
+  bad = _batch(tiny_config).at[0, 5].set(jnp.nan)
+  state, metrics = step(state, bad)
+  assert not bool(metrics['finite'])
+  chex.assert_trees_all_equal(jax.device_get(state.params), before)
+  assert int(state.step) == 1
+
+
+@pytest.mark.parametrize('scene', ['identical', 'few_points', 'planar', 'collinear'])
+def test_degenerate_batches_give_finite_loss_and_gradients(tiny_config, scene):
+  step = _step_fn(tiny_config)
+  state = train.create_train_state(tiny_config, jax.random.key(0))
+  pts = _batch(tiny_config, n_distinct=10 if scene == 'few_points' else None)
+  if scene == 'identical':
+    pts = jnp.ones_like(pts)
+  elif scene == 'planar':
+    pts = pts.at[..., 2].set(0.0)
+  elif scene == 'collinear':
+    pts = pts[..., :1] * jnp.array([1.0, 0.5, 0.1])
+  state, metrics = step(state, pts)
+  assert bool(metrics['finite']), metrics
+  assert np.isfinite(float(metrics['loss'])) and np.isfinite(float(metrics['grad_norm']))
+
+
+def test_config_errors_name_the_value(tiny_config):
+  cases = [('model.descriptor_dim', 20, 'descriptor_dim must be one of'),
+           ('model.loss', 'l1', 'model.loss must be one of'),
+           ('model.center_sampling', 'grid', 'center_sampling must be one of'),
+           ('data.num_points', 32, r'data.num_points \(32\) must be >= model.num_clusters'),
+           ('model.radius', 0.0, 'radius must be > 0')]
+  for field, value, message in cases:
+    config = tiny_config.copy_and_resolve_references()
+    section, name = field.split('.')
+    config[section][name] = value
+    with pytest.raises(train.ConfigError, match=message):
+      train.check_config(config)
+
+
+def _read_metrics(workdir):
+  with open(os.path.join(workdir, 'metrics.jsonl')) as f:
+    return [{k: v for k, v in json.loads(line).items() if k != 'steps_per_sec'} for line in f]
+
+
+def test_resume_after_a_crash_is_bitwise_identical(tiny_config, tmp_path, monkeypatch):
+  data = str(shared_path('kitti_object_velodyne'))
+  config = tiny_config
+  config.data.path = data
+  config.train.num_steps = 8
+  config.train.log_every = 1
+  config.train.checkpoint_every = 4
+  straight = train.train_and_evaluate(config, str(tmp_path / 'straight'))
+
+  original = pipeline.CloudDataset.batch
+
+  def crash_at_step_6(self, seed, step, *args):
+    if step == 6:
+      raise KeyboardInterrupt('simulated kill')
+    return original(self, seed, step, *args)
+
+  monkeypatch.setattr(pipeline.CloudDataset, 'batch', crash_at_step_6)
+  with pytest.raises(KeyboardInterrupt):
+    train.train_and_evaluate(config, str(tmp_path / 'resumed'))
+  monkeypatch.setattr(pipeline.CloudDataset, 'batch', original)
+  assert sorted(os.listdir(tmp_path / 'resumed' / 'checkpoints')) == ['4']
+  resumed = train.train_and_evaluate(config, str(tmp_path / 'resumed'))
+
+  chex.assert_trees_all_equal(jax.device_get(resumed.params), jax.device_get(straight.params))
+  chex.assert_trees_all_equal(jax.device_get(resumed.opt_state), jax.device_get(straight.opt_state))
+  chex.assert_trees_all_equal(jax.device_get(resumed.batch_stats),
+                              jax.device_get(straight.batch_stats))
+  assert _read_metrics(tmp_path / 'resumed') == _read_metrics(tmp_path / 'straight')
+  assert [m['step'] for m in _read_metrics(tmp_path / 'resumed')] == list(range(1, 9))
+
+
+def test_divergence_stops_with_a_clear_message(tiny_config, tmp_path, monkeypatch):
+  config = tiny_config
+  config.data.path = str(shared_path('kitti_object_velodyne'))
+  config.train.num_steps = 6
+  original = pipeline.CloudDataset.batch
+
+  def nan_at_step_3(self, seed, step, *args):
+    out = original(self, seed, step, *args)
+    if step == 3:
+      out[0, 0] = np.nan
+    return out
+
+  monkeypatch.setattr(pipeline.CloudDataset, 'batch', nan_at_step_3)
+  with pytest.raises(train.TrainingDiverged, match=r'step 4 .*Last good checkpoint: step 2'):
+    train.train_and_evaluate(config, str(tmp_path / 'run'))
+  assert sorted(os.listdir(tmp_path / 'run' / 'checkpoints')) == ['2']
+
+
+@pytest.mark.parametrize('source', [('kitti_object_velodyne',), ('example',)])
+def test_short_training_on_real_scans_lowers_loss_and_rotation_error(tmp_path, source):
+  from configs import cpu_small
+  config = cpu_small.get_config()
+  config.progress_bar = False
+  config.data.path = str(shared_path(*source))
+  config.data.num_points = 1024
+  config.model.num_clusters = 128
+  config.train.num_steps = 60
+  config.train.log_every = 15
+  config.train.checkpoint_every = 60
+  train.train_and_evaluate(config, str(tmp_path))
+  logs = _read_metrics(tmp_path)
+  first, last = logs[0], logs[-1]
+  print(source, first, last)
+  assert last['loss'] < 0.7 * first['loss']
+  assert last['rotation_error_deg'] < 0.7 * first['rotation_error_deg']
+
+
+def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
+  script = textwrap.dedent('''
+      import jax, numpy as np
+      from configs import cpu_small
+      from ssd_jax import train
+      assert jax.device_count() == 2, jax.devices()
+      config = cpu_small.get_config()
+      config.data.num_points, config.model.num_clusters, config.model.num_samples = 512, 64, 16
+      config.train.batch_size = 2
+      rng = np.random.default_rng(0)
+      batches = [rng.uniform(-8, 8, (2, 512, 3)).astype(np.float32) for _ in range(3)]
+      results = []
+      for devices in (jax.devices()[:1], jax.devices()):
+        mesh = train.make_mesh(devices)
+        step = train.jit_train_step(config, mesh)
+        state = train.replicate(train.create_train_state(config, jax.random.key(0)), mesh)
+        history = []
+        for i, b in enumerate(batches):
+          state, metrics = step(state, train.shard_batch(b, mesh))
+          history.append(float(metrics['loss']))
+          if i == 0:  # Adam's first moment after one step is 0.1 * gradient
+            first = jax.device_get((metrics['grad_norm'], state.opt_state[0].mu, state.batch_stats))
+        results.append((history, first))
+      (h1, f1), (h2, f2) = results
+      flat = lambda t: np.concatenate([np.ravel(x) for x in jax.tree.leaves(t)])
+      grad_diff = np.abs(flat(f1[1]) - flat(f2[1])).max() / np.abs(flat(f1[1])).max()
+      stats_diff = np.abs(flat(f1[2]) - flat(f2[2])).max() / np.abs(flat(f1[2])).max()
+      loss_diff = max(abs(a - b) / a for a, b in zip(h1, h2))
+      print('rel diffs: gradient', grad_diff, 'batch stats', stats_diff, 'losses', loss_diff)
+      assert grad_diff < 1e-4 and stats_diff < 1e-5 and abs(f1[0] - f2[0]) / f1[0] < 1e-5
+      assert loss_diff < 1e-3
+  ''')
+  env = dict(os.environ, XLA_FLAGS='--xla_force_host_platform_device_count=2', JAX_PLATFORMS='cpu')
+  out = subprocess.run([sys.executable, '-c', script], cwd=ROOT, env=env, capture_output=True,
+                       text=True, timeout=600)
+  assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
+  assert 'rel diffs: gradient' in out.stdout
+
+
+def test_cli_reports_bad_config_without_traceback(tmp_path):
+  out = subprocess.run(
+      [sys.executable, '-m', 'experiments.train', '--config=configs/cpu_small.py',
+       f'--workdir={tmp_path}', '--config.model.descriptor_dim=20',
+       f'--config.data.path={tmp_path}'],
+      cwd=ROOT, capture_output=True, text=True, timeout=300)
+  assert out.returncode != 0
+  assert 'error: model.descriptor_dim must be one of (16, 32, 64, 128), got 20' in out.stderr
+  assert 'Traceback' not in out.stderr
+
+
+def test_batch_must_split_over_devices(tiny_config):
+  tiny_config.train.batch_size = 3
+  with pytest.raises(train.ConfigError, match=r'batch_size \(3\) must be divisible by the 2 local'):
+    train.check_config(tiny_config, num_devices=2)
