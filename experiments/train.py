@@ -6,7 +6,11 @@ r"""Train the self-supervised descriptor.
 Rerunning the same command resumes from the latest checkpoint in --workdir.
 """
 
-from absl import app
+from ssd_jax import runtime
+
+runtime.reexec_with_hugepages()
+
+from absl import app  # pylint: disable=g-import-not-at-top,wrong-import-position
 from absl import flags
 from absl import logging
 import jax

@@ -13,6 +13,32 @@ import jax.numpy as jnp
 from ssd_jax import geometry
 
 
+def squared_distances(a: jax.Array, b: jax.Array) -> jax.Array:
+  """||a_i - b_j||^2 for a [..., M, 3], b [..., N, 3] -> [..., M, N].
+
+  One [M, N] plane per coordinate, summed x, y, z in that order: XLA:CPU
+  vectorises this along N (4.6x faster than reducing a minor axis of size 3)
+  and the rounding equals numpy's `np.sum((a - b) ** 2, -1)`.
+  """
+  return sum(jnp.square(a[..., :, None, i] - b[..., None, :, i]) for i in range(3))
+
+
+def running_count(mask: jax.Array, block: int = 64) -> jax.Array:
+  """Inclusive cumulative count of True along the last axis: [..., N] bool -> int32.
+
+  Two levels: a small triangular matmul counts within blocks of `block` and a
+  short cumsum adds the block offsets; 3x faster than `jnp.cumsum` on XLA:CPU
+  and exact (counts < 2^24 in float32).
+  """
+  *lead, n = mask.shape
+  pad = -n % block
+  x = jnp.pad(mask, [(0, 0)] * len(lead) + [(0, pad)]).astype(jnp.float32)
+  x = x.reshape(*lead, (n + pad) // block, block)
+  within = x @ jnp.triu(jnp.ones((block, block), jnp.float32))
+  offsets = jnp.cumsum(within[..., -1], -1) - within[..., -1]
+  return (within + offsets[..., None]).reshape(*lead, n + pad)[..., :n].astype(jnp.int32)
+
+
 def farthest_point_sample(points: jax.Array, num_samples: int, valid: jax.Array | None = None,
                           start_index: jax.Array | int = 0) -> jax.Array:
   """PointNet++ farthest-point sampling.
@@ -36,9 +62,11 @@ def farthest_point_sample(points: jax.Array, num_samples: int, valid: jax.Array 
   start = jnp.where(valid[start], start, jnp.argmax(valid).astype(jnp.int32))
   min_d2 = jnp.where(valid, jnp.inf, -1.0)
 
+  planes = points.T  # [3, N]: distances vectorise along N
+
   def body(i, carry):
     idx, min_d2, last = carry
-    d2 = jnp.sum(jnp.square(points - points[last]), -1)
+    d2 = sum(jnp.square(planes[c] - planes[c, last]) for c in range(3))
     min_d2 = jnp.where(valid, jnp.minimum(min_d2, d2), -1.0)
     nxt = jnp.argmax(min_d2).astype(jnp.int32)
     return idx.at[i].set(nxt), min_d2, nxt
@@ -66,6 +94,8 @@ def ball_query(points: jax.Array, centers: jax.Array, radius: float, max_samples
   does, so max-pooling over a cluster is unaffected by the padding. Selecting
   "the first c" is done with a running count of in-ball points and a binary
   search per slot, which is much cheaper on CPU than `top_k` (REFERENCE §10).
+  Memory is O(k N) per cloud, so for all-points-as-centers inference on large
+  clouds call it on chunks of centers.
 
   Args:
     points: [N, 3] metres.
@@ -80,9 +110,8 @@ def ball_query(points: jax.Array, centers: jax.Array, radius: float, max_samples
   """
   if valid is None:
     valid = jnp.ones(points.shape[:1], bool)
-  d2 = jnp.sum(jnp.square(centers[:, None, :] - points[None, :, :]), -1)  # [k, N]
-  inside = (d2 < radius * radius) & valid[None, :]
-  running = jnp.cumsum(inside.astype(jnp.int32), axis=1)  # [k, N]
+  inside = (squared_distances(centers, points) < radius * radius) & valid[None, :]  # [k, N]
+  running = running_count(inside)  # [k, N]
   count = running[:, -1]
   slots = jnp.arange(1, max_samples + 1, dtype=jnp.int32)
   first_reaching = jax.vmap(lambda row: jnp.searchsorted(row, slots, side='left'))(running)

@@ -100,3 +100,16 @@ def test_rotate_clusters_undoes_orientation():
   from ssd_jax import geometry
   turned = jnp.einsum('bkci,bkji->bkcj', grouped, geometry.rotation_z(angles))
   np.testing.assert_allclose(grouping.rotate_clusters(turned, angles), grouped, atol=1e-5)
+
+
+def test_running_count_equals_cumsum_for_any_length():
+  rng = np.random.default_rng(7)
+  for n in (1, 63, 64, 100, 4096):
+    mask = rng.random((3, 5, n)) < 0.3
+    np.testing.assert_array_equal(grouping.running_count(jnp.asarray(mask)), np.cumsum(mask, -1))
+
+
+def test_squared_distances_match_numpy_bitwise():
+  a, b = _cloud(8, 40), _cloud(9, 70)
+  np.testing.assert_array_equal(grouping.squared_distances(jnp.asarray(a), jnp.asarray(b)),
+                                np.sum((a[:, None] - b[None]) ** 2, -1))

@@ -53,3 +53,36 @@ def test_descriptor_only_mode_has_no_detector():
   model = network.FeatureNet(use_orientation=False)
   variables = model.init(jax.random.key(0), jnp.zeros((1, 4, 8, 3)))
   assert set(variables['params']) == {'descriptor'}
+
+
+def test_batch_norm_relu_matches_autodiff_of_textbook_formula():
+  x = jax.random.normal(jax.random.key(0), (300, 8)) * 3 + 1
+  scale = jax.random.uniform(jax.random.key(1), (8,), minval=0.5, maxval=2)
+  bias = jax.random.normal(jax.random.key(2), (8,))
+  ct = jax.random.normal(jax.random.key(3), (300, 8))
+
+  def reference(x, scale, bias):
+    mean, var = jnp.mean(x, 0), jnp.var(x, 0)
+    return jax.nn.relu((x - mean) / jnp.sqrt(var + network.BN_EPSILON) * scale + bias)
+
+  fused = lambda *a: network.batch_norm_relu(*a)[0]
+  np.testing.assert_allclose(fused(x, scale, bias), reference(x, scale, bias), atol=1e-5)
+  g_fused = jax.grad(lambda *a: jnp.sum(fused(*a) * ct), argnums=(0, 1, 2))(x, scale, bias)
+  g_ref = jax.grad(lambda *a: jnp.sum(reference(*a) * ct), argnums=(0, 1, 2))(x, scale, bias)
+  for a, b in zip(g_fused, g_ref):
+    np.testing.assert_allclose(a, b, atol=1e-4, rtol=1e-4)
+  _, mean, var = network.batch_norm_relu(x, scale, bias)
+  np.testing.assert_allclose(var, jnp.var(x, 0), rtol=1e-4)
+
+
+def test_running_statistics_are_updated_in_training_only():
+  model = network.FeatureNet()
+  clusters = jax.random.uniform(jax.random.key(0), (1, 8, 16, 3), minval=-1, maxval=1)
+  variables = model.init(jax.random.key(1), clusters)
+  _, mutated = model.apply(variables, clusters, train=True, mutable=['batch_stats'])
+  before = variables['batch_stats']['descriptor']['point_mlp1']['BatchNormReLU_0']['mean']
+  after = mutated['batch_stats']['descriptor']['point_mlp1']['BatchNormReLU_0']['mean']
+  np.testing.assert_array_equal(before, 0.0)
+  assert float(jnp.max(jnp.abs(after))) > 0
+  d_eval, _, _ = model.apply({'params': variables['params'], **mutated}, clusters, train=False)
+  assert bool(jnp.isfinite(d_eval).all())
