@@ -76,8 +76,8 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
   require(t.batch_size >= 1, f'train.batch_size must be >= 1, got {t.batch_size}')
   require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
   require(t.num_steps >= 1, f'train.num_steps must be >= 1, got {t.num_steps}')
-  require(t.log_every >= 1 and t.checkpoint_every >= 1,
-          'train.log_every and train.checkpoint_every must be >= 1')
+  require(t.log_every >= 1 and t.checkpoint_every >= 1 and t.eval_every >= 1,
+          'train.log_every, train.eval_every and train.checkpoint_every must be >= 1')
   n = jax.local_device_count() if num_devices is None else num_devices
   require(t.batch_size % n == 0,
           f'train.batch_size ({t.batch_size}) must be divisible by the {n} local devices '
@@ -209,6 +209,20 @@ def _check_finite(pending: list[tuple[int, dict]], ckpt: checkpoint.Checkpointer
           + (f'step {last} in {ckpt.directory}' if last is not None else 'none yet'))
 
 
+def check_resumable(config: ml_collections.ConfigDict, stored: dict, directory: str) -> None:
+  """Refuse to continue a checkpoint written with a different model or seed."""
+  current = config.to_dict()
+  for section in ('model',):
+    for key, value in current[section].items():
+      if stored.get(section, {}).get(key) != value:
+        raise ConfigError(
+            f'{directory} holds a run with {section}.{key}={stored.get(section, {}).get(key)!r}, '
+            f'but the config says {value!r}; use a new --workdir or the same config')
+  if stored.get('seed') != config.seed:
+    raise ConfigError(f'{directory} holds a run with seed={stored.get("seed")}, but the config '
+                      f'says {config.seed}; use a new --workdir or the same seed')
+
+
 def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> TrainState:
   """Train (or resume) `config` in `workdir`; returns the final state.
 
@@ -237,6 +251,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
                                  t_cfg.keep_checkpoints)
   state = replicate(create_train_state(config, jax.random.key(config.seed)), mesh)
   if ckpt.latest_step() is not None:
+    check_resumable(config, ckpt.restore_config(), ckpt.directory)
     state, _ = ckpt.restore(checkpoint.abstract_like(state))
     logging.info('Resumed from step %d in %s', int(state.step), ckpt.directory)
   start = int(state.step)

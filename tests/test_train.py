@@ -218,3 +218,13 @@ def test_batch_must_split_over_devices(tiny_config):
   tiny_config.train.batch_size = 3
   with pytest.raises(train.ConfigError, match=r'batch_size \(3\) must be divisible by the 2 local'):
     train.check_config(tiny_config, num_devices=2)
+
+
+def test_resuming_with_a_different_model_is_refused(tiny_config, tmp_path):
+  tiny_config.data.path = str(shared_path('kitti_object_velodyne'))
+  tiny_config.train.num_steps = 2
+  train.train_and_evaluate(tiny_config, str(tmp_path))
+  tiny_config.model.descriptor_dim = 64
+  tiny_config.train.num_steps = 4
+  with pytest.raises(train.ConfigError, match='model.descriptor_dim=32, but the config says 64'):
+    train.train_and_evaluate(tiny_config, str(tmp_path))
