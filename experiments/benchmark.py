@@ -74,7 +74,7 @@ def synthetic_batch(config, seed: int = 0) -> np.ndarray:
 
 
 def bench_config(name: str, steps: int, breakdown: bool) -> dict:
-  from ssd_jax import grouping, train  # pylint: disable=g-import-not-at-top
+  from ssd_jax import train  # pylint: disable=g-import-not-at-top
   config = importlib.import_module(f'configs.{name}').get_config()
   mesh = train.make_mesh()
   step = train.jit_train_step(config, mesh)
