@@ -193,9 +193,10 @@ class MetricsWriter:
       f.write(json.dumps(record) + '\n')
 
 
-def _mean_metrics(pending: list[dict[str, Any]]) -> dict[str, float]:
-  host = jax.device_get(pending)
-  return {k: float(np.mean([m[k] for m in host])) for k in host[0] if k != 'finite'}
+def _mean_metrics(host_metrics: list[dict[str, Any]]) -> dict[str, float]:
+  """Mean of each metric over the logging window (metrics already on the host)."""
+  return {k: float(np.mean([m[k] for m in host_metrics]))
+          for k in host_metrics[0] if k != 'finite'}
 
 
 def _check_finite(pending: list[tuple[int, dict]], ckpt: checkpoint.Checkpointer) -> None:
