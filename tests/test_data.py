@@ -11,6 +11,9 @@ def test_reads_real_3dfeatnet_and_kitti_formats():
   kitti = shared_path('kitti_object_velodyne', '000000.bin')
   assert io.detect_bin_format(np.fromfile(oxford, '<f4'), oxford) == 'xyzn'
   assert io.detect_bin_format(np.fromfile(kitti, '<f4'), kitti) == 'xyzi'
+  # 3DFeat-Net's KITTI processing leaves ~20 % of the normals shorter than 1.
+  processed = shared_path('example', 'kitti_00_004534.bin')
+  assert io.read_cloud(processed).shape == (30609, 3)
   pts = io.read_cloud(oxford)
   assert pts.shape == (16384, 3) and pts.dtype == np.float32
   raw = np.fromfile(kitti, '<f4').reshape(-1, 4)
