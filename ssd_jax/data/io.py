@@ -161,3 +161,12 @@ def list_clouds(source: str | os.PathLike) -> list[Path]:
   if source.is_file():
     return [source]
   raise CloudFileError(f'{source}: no such file or directory')
+
+
+def write_bin(path: str | os.PathLike, points: np.ndarray,
+              normals: np.ndarray | None = None) -> None:
+  """Write float32 rows: `xyzn` (3DFeat-Net N x 6) with normals, else `xyz` (N x 3)."""
+  cols = [np.asarray(points, np.float32)]
+  if normals is not None:
+    cols.append(np.asarray(normals, np.float32))
+  np.ascontiguousarray(np.concatenate(cols, axis=1), dtype='<f4').tofile(path)

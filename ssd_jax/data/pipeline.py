@@ -52,15 +52,17 @@ def crop(points: np.ndarray, radius: float) -> np.ndarray:
   return points[np.einsum('ij,ij->i', points, points) < radius * radius]
 
 
-def subsample(rng: np.random.Generator, points: np.ndarray, num_points: int) -> np.ndarray:
-  """Exactly `num_points` rows: a random subset, or all points in random order plus
-  random repeats when fewer exist (REFERENCE §1). [M, 3] -> [num_points, 3]."""
-  m = len(points)
+def subsample_indices(rng: np.random.Generator, m: int, num_points: int) -> np.ndarray:
+  """Exactly `num_points` indices into m rows: a random subset, or all rows in random
+  order plus random repeats when fewer exist (REFERENCE §1). -> [num_points] int."""
   if m >= num_points:
-    idx = rng.choice(m, num_points, replace=False)
-  else:
-    idx = np.concatenate([rng.permutation(m), rng.integers(0, m, num_points - m)])
-  return points[idx]
+    return rng.choice(m, num_points, replace=False)
+  return np.concatenate([rng.permutation(m), rng.integers(0, m, num_points - m)])
+
+
+def subsample(rng: np.random.Generator, points: np.ndarray, num_points: int) -> np.ndarray:
+  """`num_points` rows of points, see `subsample_indices`. [M, 3] -> [num_points, 3]."""
+  return points[subsample_indices(rng, len(points), num_points)]
 
 
 class CloudDataset:

@@ -1,0 +1,52 @@
+r"""Generate the synthetic LiDAR dataset (or reuse it when `--out` already holds it).
+
+    python -m experiments.make_synthetic --config=configs/synthetic_small.py \
+        --out=data_cache/synthetic_small [--config.seed=1] [--overwrite]
+"""
+
+import time
+
+from absl import app
+from absl import flags
+from ml_collections import config_flags
+from tqdm import auto as tqdm
+
+from ssd_jax.synthetic import dataset
+
+FLAGS = flags.FLAGS
+flags.DEFINE_string('out', None, 'Output directory.')
+flags.DEFINE_integer('seed', None, 'Overrides config.seed.')
+flags.DEFINE_bool('overwrite', False, 'Replace a dataset made with a different config.')
+flags.DEFINE_bool('progress_bar', True, 'Show a progress bar.')
+config_flags.DEFINE_config_file('config', 'configs/synthetic_small.py', 'Synthetic-data config.')
+flags.mark_flags_as_required(['out'])
+
+
+def main(argv):
+  if len(argv) > 1:
+    raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
+  config = FLAGS.config
+  if FLAGS.seed is not None:
+    config.seed = FLAGS.seed
+  try:
+    dataset.check_config(config)
+    existing = dataset.read_manifest(FLAGS.out)
+    total = dataset.count_scans(config)
+    start = time.perf_counter()
+    with tqdm.tqdm(total=total, desc='synthetic scans', unit='scan', dynamic_ncols=True,
+                   disable=not FLAGS.progress_bar or existing is not None) as bar:
+      manifest = dataset.generate(config, FLAGS.out, progress=bar.update,
+                                  overwrite=FLAGS.overwrite)
+    seconds = time.perf_counter() - start
+  except dataset.SyntheticConfigError as e:
+    raise SystemExit(f'error: {e}') from None
+  counts = ', '.join(f'{k} {v}' for k, v in manifest['counts'].items())
+  if manifest['reused']:
+    print(f'reusing the synthetic dataset in {FLAGS.out} ({counts})')
+  else:
+    print(f'wrote {FLAGS.out}: {total} scans in {seconds:.0f} s ({seconds / total:.2f} s/scan); '
+          f'{counts}')
+
+
+if __name__ == '__main__':
+  app.run(main)

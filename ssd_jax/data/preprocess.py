@@ -1,0 +1,33 @@
+"""Scan processing as 3DFeat-Net's test sets were made: voxel grid, normals, fixed size.
+
+Host-side Open3D; every function is deterministic for the same input.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _o3d_cloud(points: np.ndarray):
+  import open3d as o3d  # pylint: disable=g-import-not-at-top
+  return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
+
+
+def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
+  """Centroid of the points in each occupied voxel. [N, 3] -> [M, 3] float32 metres."""
+  if voxel_size <= 0:
+    return np.asarray(points, np.float32)
+  down = _o3d_cloud(points).voxel_down_sample(voxel_size)
+  return np.asarray(down.points, np.float32)
+
+
+def estimate_normals(points: np.ndarray, radius: float = 1.0, max_nn: int = 30,
+                     viewpoint=(0.0, 0.0, 0.0)) -> np.ndarray:
+  """Unit normals [N, 3] from PCA of up to `max_nn` neighbours within `radius`
+  metres, flipped to face `viewpoint` (the sensor)."""
+  import open3d as o3d  # pylint: disable=g-import-not-at-top
+  pcd = _o3d_cloud(points)
+  pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=max_nn))
+  pcd.orient_normals_towards_camera_location(np.asarray(viewpoint, np.float64))
+  return np.asarray(pcd.normals, np.float32)
+

@@ -1,0 +1,2 @@
+"""Registration pipeline, split as Open3D's: keypoints, features, correspondences,
+estimation (RANSAC) and metrics."""

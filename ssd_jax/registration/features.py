@@ -1,0 +1,27 @@
+"""Hand-crafted descriptors (host side)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+FPFH_RADIUS = 4.0  # REFERENCE §5: normals and FPFH both within 4 m.
+
+
+def fpfh(points: np.ndarray, keypoints: np.ndarray, radius: float = FPFH_RADIUS,
+         normals: np.ndarray | None = None, max_nn: int = 1000) -> np.ndarray:
+  """FPFH (Open3D) at points[keypoints] with the whole cloud as the search surface.
+
+  points [N, 3] metres; keypoints [K] indices; normals [N, 3] or None to estimate
+  them within `radius`. -> [K, 33] float32.
+  """
+  import open3d as o3d  # pylint: disable=g-import-not-at-top
+  pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
+  search = o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=max_nn)
+  if normals is None:
+    pcd.estimate_normals(search)
+    pcd.orient_normals_towards_camera_location(np.zeros(3))
+  else:
+    pcd.normals = o3d.utility.Vector3dVector(np.asarray(normals, np.float64))
+  feat = o3d.pipelines.registration.compute_fpfh_feature(
+      pcd, search, [int(i) for i in keypoints])
+  return np.asarray(feat.data, np.float32).T

@@ -1,0 +1,32 @@
+"""Registration errors and table summaries (REFERENCE §6)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ssd_jax import geometry
+
+MAX_RTE = 2.0   # metres
+MAX_RRE = 5.0   # degrees
+
+
+def registration_errors(t_gt: np.ndarray, t_est: np.ndarray) -> dict[str, float]:
+  """RTE (m), RRE as the paper computes it (sum of |ZYX Euler angles| of R_gt^T R_est,
+  degrees), the geodesic RRE (degrees) and success (RTE < 2 m and RRE < 5°)."""
+  t_gt, t_est = np.asarray(t_gt, np.float64), np.asarray(t_est, np.float64)
+  rte = float(geometry.translation_error(t_gt[:3, 3], t_est[:3, 3]))
+  rre = float(geometry.euler_sum_rre_deg(t_gt[:3, :3], t_est[:3, :3]))
+  geo = float(geometry.geodesic_angle_deg(t_gt[:3, :3], t_est[:3, :3]))
+  return {'rte': rte, 'rre': rre, 'rre_geodesic': geo,
+          'success': bool(rte < MAX_RTE and rre < MAX_RRE)}
+
+
+def summarize(results: list[dict]) -> dict[str, float]:
+  """Table row: RTE / RRE means over successful pairs, success rate and mean trials over
+  all pairs."""
+  ok = [r for r in results if r['success']]
+  mean = lambda key, rows: float(np.mean([r[key] for r in rows])) if rows else float('nan')
+  return {'pairs': len(results), 'rte': mean('rte', ok), 'rre': mean('rre', ok),
+          'rre_geodesic': mean('rre_geodesic', ok),
+          'success_rate': len(ok) / max(len(results), 1),
+          'trials': mean('trials', results)}

@@ -1,0 +1,1 @@
+"""Synthetic LiDAR street scenes with exact poses: the project's embedded default data."""

@@ -1,0 +1,324 @@
+"""Write a synthetic dataset in the real datasets' folder layouts.
+
+    OUT/
+      train/train.txt               3DFeat-Net Oxford index: file | positives | non-negatives
+      train/<seq>/<frame>.bin       N x 6 (xyz + normals), 0.2 m voxel grid, sensor frame
+      train/<seq>/poses.txt         KITTI-style 3 x 4 sensor poses in the scene frame
+      test_kitti/<seq>/<frame>.bin  KITTI-style test set: a cloud every ~10 m, pairs < 10 m
+      test_kitti/<seq>/groundtruths.txt
+      test_kitti/<seq>/poses.txt
+      test_oxford/test_models/<idx>.bin   Oxford-style: 16,384 points, randomly rotated
+      test_oxford/groundtruths.txt
+      clusters/filenames.txt        descriptor-matching pairs (REFERENCE §8)
+      clusters/<i>_0.bin, <i>_1.bin 4 m crops centred on the keypoint, randomly rotated
+      synthetic.json                the config and seed that made it, and counts
+
+Every split uses its own scenes. Each scene, drive and scan draws from its own
+seed, (seed, split, scene, scan), so the files are byte-identical for a seed and
+independent of the order of generation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+import shutil
+from typing import Callable
+
+import numpy as np
+from scipy import spatial
+
+from ssd_jax import geometry
+from ssd_jax.data import groundtruth, io, pipeline, preprocess
+from ssd_jax.synthetic import lidar, scene as scene_lib, trajectory
+
+SPLITS = {'train': 1, 'test_kitti': 2, 'test_oxford': 3, 'clusters': 4}
+MANIFEST = 'synthetic.json'
+FORMAT_VERSION = 1
+
+
+class SyntheticConfigError(ValueError):
+  """A synthetic-data config value is out of range."""
+
+
+def check_config(config) -> None:
+  """Refuse values that would make an empty or meaningless dataset."""
+  def positive(path, value, allow_zero=False):
+    if not (value > 0 or (allow_zero and value == 0)):
+      raise SyntheticConfigError(f'{path} must be {">= 0" if allow_zero else "> 0"}, got {value!r}')
+  positive('scene_length', config.scene_length)
+  if config.scene_length < 60:
+    raise SyntheticConfigError(f'scene_length must be >= 60 m, got {config.scene_length}')
+  for split in SPLITS:
+    positive(f'{split}.num_scenes', config[split].num_scenes, allow_zero=True)
+    positive(f'{split}.spacing', config[split].spacing)
+  positive('voxel_size', config.voxel_size, allow_zero=True)
+  positive('normal_radius', config.normal_radius)
+  positive('test_oxford.num_points', config.test_oxford.num_points)
+  positive('clusters.num_pairs', config.clusters.num_pairs, allow_zero=True)
+  if config.clusters.num_pairs % 2:
+    raise SyntheticConfigError(f'clusters.num_pairs must be even (half match), got '
+                               f'{config.clusters.num_pairs}')
+  if config.train.num_scenes == 0 and config.test_kitti.num_scenes == 0:
+    raise SyntheticConfigError('nothing to generate: train.num_scenes and '
+                               'test_kitti.num_scenes are both 0')
+  try:
+    lidar.LidarModel.from_config(config.lidar)
+  except (ValueError, TypeError) as e:
+    raise SyntheticConfigError(f'lidar: {e}') from None
+
+
+@dataclasses.dataclass
+class Drive:
+  """One scene driven through: sensor poses T_world_sensor [P, 4, 4] and a scanner."""
+  seed: tuple[int, ...]
+  poses: np.ndarray
+  raycaster: lidar.Raycaster
+  model: lidar.LidarModel
+
+  def scan(self, k: int) -> np.ndarray:
+    """Raw scan k: [M, 3] float32 metres in the sensor frame."""
+    return self.scan_with_labels(k)[0]
+
+  def scan_with_labels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Raw scan k and the `scene.Label` of each point."""
+    # One physical sensor per drive: its calibration error is the same in every scan.
+    calibration = self.model.calibration(np.random.default_rng((*self.seed, 0)))
+    return lidar.scan(self.raycaster, self.poses[k], self.model,
+                      np.random.default_rng((*self.seed, 1 + k)), calibration)
+
+  @property
+  def positions(self) -> np.ndarray:
+    return self.poses[:, :3, 3]
+
+
+def _scene_and_poses(config, split: str, index: int):
+  seed = (int(config.seed), SPLITS[split], index)
+  rng = np.random.default_rng(seed)
+  scene = scene_lib.make_scene(rng, config.scene_length)
+  split_cfg = config[split]
+  poses = trajectory.drive(scene, rng, split_cfg.spacing, config.lidar.mount_height,
+                           spacing_jitter=split_cfg.get('spacing_jitter', 0.0))
+  return seed, scene, poses
+
+
+def make_drive(config, split: str, index: int) -> Drive:
+  """Scene `index` of `split`, its drive and its scanner."""
+  seed, scene, poses = _scene_and_poses(config, split, index)
+  return Drive(seed, poses, lidar.Raycaster(scene), lidar.LidarModel.from_config(config.lidar))
+
+
+def process(config, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+  """3DFeat-Net's processing: voxel grid, then normals facing the sensor."""
+  points = preprocess.voxel_downsample(points, config.voxel_size)
+  return points, preprocess.estimate_normals(points, config.normal_radius)
+
+
+def close_pairs(positions: np.ndarray, max_distance: float) -> list[tuple[int, int]]:
+  """Index pairs (i < j) of positions [P, 3] less than max_distance metres apart."""
+  tree = spatial.cKDTree(positions)
+  return sorted((int(i), int(j)) for i, j in tree.query_pairs(max_distance - 1e-9))
+
+
+def relative_pose(poses: np.ndarray, i: int, j: int) -> np.ndarray:
+  """T_ij [4, 4]: maps points of scan j's sensor frame into scan i's."""
+  return geometry.invert_transform(poses[i]) @ poses[j]
+
+
+def write_poses(path: Path, poses: np.ndarray) -> None:
+  """KITTI `poses/XX.txt` layout: one row-major 3 x 4 matrix per line."""
+  path.write_text(''.join(' '.join(f'{v:.9e}' for v in p[:3].ravel()) + '\n' for p in poses))
+
+
+def _write_train(config, out: Path, tick: Callable[[], None]) -> int:
+  cfg = config.train
+  lines, offset = [], 0
+  for seq in range(cfg.num_scenes):
+    drive = make_drive(config, 'train', seq)
+    folder = out / 'train' / f'{seq:02d}'
+    folder.mkdir(parents=True)
+    write_poses(folder / 'poses.txt', drive.poses)
+    tree = spatial.cKDTree(drive.positions)
+    for k in range(len(drive.poses)):
+      points, normals = process(config, drive.scan(k))
+      io.write_bin(folder / f'{k:06d}.bin', points, normals)
+      pos = tree.query_ball_point(drive.positions[k], cfg.positive_radius)
+      non_neg = tree.query_ball_point(drive.positions[k], cfg.non_negative_radius)
+      fmt = lambda ids: ' '.join(str(offset + i) for i in sorted(ids) if i != k)
+      lines.append(f'{seq:02d}/{k:06d}.bin | {fmt(pos)} | {fmt(non_neg)}')
+      tick()
+    offset += len(drive.poses)
+  if lines:
+    (out / 'train' / 'train.txt').write_text('\n'.join(lines) + '\n')
+  return offset
+
+
+def _write_test_kitti(config, out: Path, tick) -> int:
+  cfg, num_pairs = config.test_kitti, 0
+  for seq in range(cfg.num_scenes):
+    drive = make_drive(config, 'test_kitti', seq)
+    folder = out / 'test_kitti' / f'{seq:02d}'
+    folder.mkdir(parents=True)
+    write_poses(folder / 'poses.txt', drive.poses)
+    for k in range(len(drive.poses)):
+      points, normals = process(config, drive.scan(k))
+      io.write_bin(folder / f'{k:06d}.bin', points, normals)
+      tick()
+    pairs = [groundtruth.GroundTruthPair(i, j, relative_pose(drive.poses, i, j))
+             for i, j in close_pairs(drive.positions, cfg.pair_max_distance)]
+    groundtruth.write_groundtruths(folder / 'groundtruths.txt', pairs)
+    num_pairs += len(pairs)
+  return num_pairs
+
+
+def _write_test_oxford(config, out: Path, tick) -> int:
+  """Oxford test models: cropped, a fixed point count, each in a random z-rotated frame."""
+  cfg, idx0, all_pairs = config.test_oxford, 0, []
+  folder = out / 'test_oxford' / 'test_models'
+  folder.mkdir(parents=True)
+  for seq in range(cfg.num_scenes):
+    drive = make_drive(config, 'test_oxford', seq)
+    rng = np.random.default_rng((int(config.seed), SPLITS['test_oxford'], seq, 0))
+    frames = []   # T_world_model of each written model
+    for k in range(len(drive.poses)):
+      points, normals = process(config, drive.scan(k))
+      inside = np.linalg.norm(points[:, :2], axis=1) < cfg.crop_radius
+      points, normals = points[inside], normals[inside]
+      keep = np.sort(pipeline.subsample_indices(rng, len(points), cfg.num_points))
+      rot = geometry.rotation_z(rng.uniform(-np.pi, np.pi))
+      io.write_bin(folder / f'{idx0 + k}.bin', points[keep] @ rot.T, normals[keep] @ rot.T)
+      frames.append(drive.poses[k] @ geometry.make_transform(rot.T, np.zeros(3)))
+      tick()
+    frames = np.stack(frames)
+    all_pairs += [groundtruth.GroundTruthPair(idx0 + i, idx0 + j, relative_pose(frames, i, j))
+                  for i, j in close_pairs(drive.positions, cfg.pair_max_distance)]
+    idx0 += len(drive.poses)
+  if all_pairs:
+    groundtruth.write_groundtruths(out / 'test_oxford' / 'groundtruths.txt', all_pairs)
+  return len(all_pairs)
+
+
+
+def _crop_cluster(rng, points, normals, center, radius):
+  """Points within `radius` of center, relative to it, in a random z-rotated frame."""
+  inside = np.linalg.norm(points - center, axis=1) < radius
+  rot = geometry.rotation_z(rng.uniform(-np.pi, np.pi))
+  return (points[inside] - center) @ rot.T, normals[inside] @ rot.T
+
+
+def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
+  """Matching pairs: one world point seen from two scans < 10 m apart; non-matching:
+  keypoints of two scans at least 20 m apart (REFERENCE §8)."""
+  from ssd_jax.registration import keypoints  # pylint: disable=g-import-not-at-top
+  cfg = config.clusters
+  folder = out / 'clusters'
+  folder.mkdir(parents=True)
+  drives, clouds = [], []
+  for seq in range(cfg.num_scenes):
+    drive = make_drive(config, 'clusters', seq)
+    scans = []
+    for k in range(len(drive.poses)):
+      points, normals = process(config, drive.scan(k))
+      scans.append((points, normals, keypoints.iss(points), spatial.cKDTree(points)))
+      tick()
+    drives.append(drive)
+    clouds.append(scans)
+  rng = np.random.default_rng((int(config.seed), SPLITS['clusters'], 1 << 20))
+  near = [close_pairs(d.positions, cfg.positive_max_distance) for d in drives]
+  far = [[(i, j) for i in range(len(d.poses)) for j in range(i + 1, len(d.poses))
+          if np.linalg.norm(d.positions[i] - d.positions[j]) >= cfg.negative_min_distance]
+         for d in drives]
+  if not any(near) or not any(far):
+    raise SyntheticConfigError('clusters: the scenes give no scan pairs closer than '
+                               f'{cfg.positive_max_distance} m or none farther than '
+                               f'{cfg.negative_min_distance} m; lengthen scene_length')
+  half = cfg.num_pairs // 2
+  labels = rng.permutation(np.r_[np.ones(half, int), np.zeros(half, int)])
+  lines = ['pair\tcluster_0\tcluster_1\tlabel']
+  for n, label in enumerate(labels):
+    for _ in range(1000):   # rejection sampling of an observed, populated location
+      seq = int(rng.integers(cfg.num_scenes))
+      pool = near[seq] if label else far[seq]
+      if not pool:
+        continue
+      i, j = pool[rng.integers(len(pool))]
+      if rng.uniform() < 0.5:
+        i, j = j, i
+      pts_i, nrm_i, kp_i, _ = clouds[seq][i]
+      pts_j, nrm_j, kp_j, tree_j = clouds[seq][j]
+      if len(kp_i) == 0 or len(kp_j) == 0:
+        continue
+      c0 = pts_i[kp_i[rng.integers(len(kp_i))]]
+      if label:
+        c1 = geometry.apply_transform(relative_pose(drives[seq].poses, j, i), c0[None])[0]
+        if tree_j.query(c1)[0] > cfg.max_surface_distance:
+          continue   # not seen from scan j
+      else:
+        c1 = pts_j[kp_j[rng.integers(len(kp_j))]]
+      a = _crop_cluster(rng, pts_i, nrm_i, c0, cfg.radius)
+      b = _crop_cluster(rng, pts_j, nrm_j, c1, cfg.radius)
+      if min(len(a[0]), len(b[0])) >= cfg.min_points:
+        break
+    else:
+      raise SyntheticConfigError(f'clusters: found no valid {"matching" if label else "non-matching"} '
+                                 'pair in 1000 tries; lower clusters.min_points')
+    io.write_bin(folder / f'{n}_0.bin', *a)
+    io.write_bin(folder / f'{n}_1.bin', *b)
+    lines.append(f'{n}\t{n}_0.bin\t{n}_1.bin\t{label}')
+  (folder / 'filenames.txt').write_text('\n'.join(lines) + '\n')
+  return half, half
+
+
+def count_scans(config) -> int:
+  """Scans the config will simulate (for the progress display)."""
+  return sum(len(_scene_and_poses(config, split, seq)[2])
+             for split in SPLITS for seq in range(config[split].num_scenes))
+
+
+def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | None = None,
+             overwrite: bool = False) -> dict:
+  """Write the whole dataset to `out` atomically (built in `out.partial`, then renamed).
+
+  Returns the manifest. If `out` already holds a dataset made from the same config,
+  it is reused and nothing is written. `progress(n)` is called after each scan.
+  """
+  check_config(config)
+  out = Path(out)
+  settings = json.loads(config.to_json())
+  existing = read_manifest(out)
+  if existing is not None:
+    if existing['config'] == settings and existing['format_version'] == FORMAT_VERSION:
+      return {**existing, 'reused': True}
+    if not overwrite:
+      raise SyntheticConfigError(f'{out} holds a synthetic dataset made with a different config '
+                                 'or seed; pass --overwrite or choose another --out')
+  elif out.exists() and any(out.iterdir()):
+    raise SyntheticConfigError(f'{out} exists and is not a synthetic dataset; choose another --out')
+  partial = out.with_name(out.name + '.partial')
+  if partial.exists():
+    shutil.rmtree(partial)
+  partial.mkdir(parents=True)
+  tick = (lambda: progress(1)) if progress else (lambda: None)
+  counts = {
+      'train_clouds': _write_train(config, partial, tick),
+      'test_kitti_pairs': _write_test_kitti(config, partial, tick),
+      'test_oxford_pairs': _write_test_oxford(config, partial, tick),
+  }
+  if config.clusters.num_scenes and config.clusters.num_pairs:
+    counts['cluster_pairs_matching'], counts['cluster_pairs_non_matching'] = _write_clusters(
+        config, partial, tick)
+  manifest = {'format_version': FORMAT_VERSION, 'config': settings, 'counts': counts}
+  (partial / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + '\n')
+  if out.exists():
+    shutil.rmtree(out)
+  os.replace(partial, out)
+  return {**manifest, 'reused': False}
+
+
+def read_manifest(out: str | os.PathLike) -> dict | None:
+  path = Path(out) / MANIFEST
+  if not path.is_file():
+    return None
+  return json.loads(path.read_text())

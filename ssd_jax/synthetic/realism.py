@@ -1,0 +1,88 @@
+"""Scan statistics for comparing synthetic scans with real ones, side by side.
+
+The same functions run on both, so the comparison is apples to apples:
+points per scan, range histogram, ground fraction and local-shape (PCA
+eigenvalue) distributions in 1 m neighbourhoods.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import spatial
+
+RANGE_BINS = (0.0, 5.0, 10.0, 20.0, 40.0, 80.0, np.inf)
+# KITTI's object-benchmark scans keep what the front camera sees: azimuth within
+# ±41° and elevation above about -15° (measured on the scans beside the project).
+KITTI_FRONT_AZIMUTH_DEG = 41.0
+KITTI_FRONT_MIN_ELEVATION_DEG = -15.2
+
+
+def front_fov(points: np.ndarray) -> np.ndarray:
+  """Points [N, 3] inside the front-camera crop of KITTI's object scans."""
+  az = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
+  el = np.degrees(np.arctan2(points[:, 2], np.linalg.norm(points[:, :2], axis=1)))
+  return points[(points[:, 0] > 0) & (np.abs(az) <= KITTI_FRONT_AZIMUTH_DEG) &
+                (el >= KITTI_FRONT_MIN_ELEVATION_DEG)]
+
+
+def range_histogram(points: np.ndarray) -> np.ndarray:
+  """Fraction of points per horizontal-range bin `RANGE_BINS` (metres). -> [6]."""
+  r = np.linalg.norm(points[:, :2], axis=1)
+  return np.histogram(r, bins=RANGE_BINS)[0] / max(len(points), 1)
+
+
+def ground_mask(points: np.ndarray, cell: float = 2.0, height: float = 0.25) -> np.ndarray:
+  """Ground points: within `height` metres of the lowest point of their `cell`-metre
+  xy cell, in cells whose lowest point is near the sensor's ground level (rejecting
+  cells whose lowest point is a car roof or a wall). -> [N] bool."""
+  ij = np.floor(points[:, :2] / cell).astype(np.int64)
+  _, inv = np.unique(ij, axis=0, return_inverse=True)
+  inv = inv.ravel()
+  low = np.full(inv.max() + 1, np.inf)
+  np.minimum.at(low, inv, points[:, 2])
+  plausible = low < np.percentile(low, 10) + 1.5
+  return (points[:, 2] - low[inv] < height) & plausible[inv]
+
+
+def shape_features(points: np.ndarray, rng: np.random.Generator, num_samples: int = 2000,
+                   radius: float = 1.0, min_neighbours: int = 5) -> dict[str, np.ndarray]:
+  """PCA of the `radius`-metre neighbourhoods of random points.
+
+  With eigenvalues l1 >= l2 >= l3: linearity (l1 - l2) / l1, planarity
+  (l2 - l3) / l1, scattering l3 / l1. -> dict of [S] arrays.
+  """
+  tree = spatial.cKDTree(points)
+  idx = rng.choice(len(points), min(num_samples, len(points)), replace=False)
+  feats = []
+  for nb in tree.query_ball_point(points[idx], radius):
+    if len(nb) < min_neighbours:
+      continue
+    ev = np.linalg.eigvalsh(np.cov(points[nb].T))[::-1]
+    l1 = max(ev[0], 1e-12)
+    feats.append(((ev[0] - ev[1]) / l1, (ev[1] - ev[2]) / l1, ev[2] / l1))
+  feats = np.array(feats).reshape(-1, 3)
+  return {'linearity': feats[:, 0], 'planarity': feats[:, 1], 'scattering': feats[:, 2]}
+
+
+def scan_statistics(scans: list[np.ndarray], seed: int = 0) -> dict[str, float]:
+  """Averages over scans [N_i, 3]: point count, range histogram, ground fraction, and
+  the shape-feature distributions (median, share planar > 0.5, share linear > 0.5)."""
+  rng = np.random.default_rng(seed)
+  counts, hists, ground, shape = [], [], [], {'linearity': [], 'planarity': [], 'scattering': []}
+  for pts in scans:
+    counts.append(len(pts))
+    hists.append(range_histogram(pts))
+    ground.append(ground_mask(pts).mean())
+    for k, v in shape_features(pts, rng).items():
+      shape[k].append(v)
+  shape = {k: np.concatenate(v) for k, v in shape.items()}
+  hist = np.mean(hists, axis=0)
+  stats = {'scans': len(scans), 'points per scan': float(np.mean(counts)),
+           'ground fraction': float(np.mean(ground))}
+  for lo, hi, h in zip(RANGE_BINS[:-1], RANGE_BINS[1:], hist):
+    stats[f'range {lo:g}-{hi:g} m' if np.isfinite(hi) else f'range > {lo:g} m'] = float(h)
+  stats['planarity median'] = float(np.median(shape['planarity']))
+  stats['share planar (> 0.5)'] = float(np.mean(shape['planarity'] > 0.5))
+  stats['share linear (> 0.5)'] = float(np.mean(shape['linearity'] > 0.5))
+  stats['scattering median'] = float(np.median(shape['scattering']))
+  return stats
