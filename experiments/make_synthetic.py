@@ -11,6 +11,7 @@ from absl import flags
 from ml_collections import config_flags
 from tqdm import auto as tqdm
 
+from ssd_jax import viz
 from ssd_jax.synthetic import dataset
 
 FLAGS = flags.FLAGS
@@ -18,6 +19,8 @@ flags.DEFINE_string('out', None, 'Output directory.')
 flags.DEFINE_integer('seed', None, 'Overrides config.seed.')
 flags.DEFINE_bool('overwrite', False, 'Replace a dataset made with a different config.')
 flags.DEFINE_bool('progress_bar', True, 'Show a progress bar.')
+flags.DEFINE_string('figure', None, 'Also draw raw scan 4 of test_kitti/00 to this PNG '
+                    '(top view + perspective, coloured by height).')
 config_flags.DEFINE_config_file('config', 'configs/synthetic_small.py', 'Synthetic-data config.')
 flags.mark_flags_as_required(['out'])
 
@@ -46,6 +49,12 @@ def main(argv):
   else:
     print(f'wrote {FLAGS.out}: {total} scans in {seconds:.0f} s ({seconds / total:.2f} s/scan); '
           f'{counts}')
+  if FLAGS.figure and config.test_kitti.num_scenes:
+    drive = dataset.make_drive(config, 'test_kitti', 0)
+    points = drive.scan(min(4, len(drive.poses) - 1))
+    viz.plot_scan(points, FLAGS.figure, f'synthetic HDL-64E scan ({len(points):,} points, '
+                  f'seed {config.seed}, test_kitti/00)')
+    print(f'figure: {FLAGS.figure}')
 
 
 if __name__ == '__main__':

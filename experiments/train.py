@@ -6,6 +6,8 @@ r"""Train the self-supervised descriptor.
 Rerunning the same command resumes from the latest checkpoint in --workdir.
 """
 
+import os
+
 from ssd_jax import runtime
 
 runtime.reexec_with_hugepages()
@@ -33,8 +35,13 @@ def main(argv):
   logging.info('JAX devices: %s', jax.devices())
   try:
     train.train_and_evaluate(FLAGS.config, FLAGS.workdir)
-  except (train.ConfigError, io.CloudFileError, pipeline.CloudDataError,
-          train.TrainingDiverged) as e:
+  except io.CloudFileError as e:
+    hint = ''
+    if 'synthetic' in FLAGS.config.data.path and not os.path.exists(FLAGS.config.data.path):
+      hint = ('\nthe synthetic set is made by: python -m experiments.make_synthetic '
+              '--config=configs/synthetic_small.py --out=data_cache/synthetic_small')
+    raise SystemExit(f'error: {e}{hint}') from None
+  except (train.ConfigError, pipeline.CloudDataError, train.TrainingDiverged) as e:
     raise SystemExit(f'error: {e}') from None
 
 

@@ -38,13 +38,14 @@ def plot_scan(points: np.ndarray, path: str | os.PathLike, title: str = '',
   ax.set_title('top view')
   ax.legend(loc='upper right', fontsize=8)
   ax3 = fig.add_subplot(1, 2, 2, projection='3d')
-  sc = ax3.scatter(pts[:, 0], pts[:, 1], z, c=z, s=0.2, cmap='viridis', vmin=lo, vmax=hi,
-                   linewidths=0, depthshade=False)
-  ax3.view_init(elev=28, azim=-140)
-  ax3.set_xlim(-view_radius * 0.7, view_radius * 0.7)
-  ax3.set_ylim(-view_radius * 0.7, view_radius * 0.7)
-  ax3.set_zlim(lo - 1, lo - 1 + view_radius * 0.5)
-  ax3.set_box_aspect((1, 1, 0.36))
+  near = np.linalg.norm(pts[:, :2], axis=1) < 0.6 * view_radius
+  sc = ax3.scatter(pts[near, 0], pts[near, 1], z[near], c=z[near], s=0.4, cmap='viridis',
+                   vmin=lo, vmax=hi, linewidths=0, depthshade=False)
+  ax3.view_init(elev=30, azim=-125)
+  ax3.set_xlim(-0.6 * view_radius, 0.6 * view_radius)
+  ax3.set_ylim(-0.6 * view_radius, 0.6 * view_radius)
+  ax3.set_zlim(lo - 1, lo - 1 + 0.3 * view_radius)
+  ax3.set_box_aspect((1, 1, 0.25), zoom=1.3)
   ax3.set_title('perspective')
   ax3.set_axis_off()
   fig.colorbar(sc, ax=[ax, ax3], shrink=0.8, label='height z (m)')

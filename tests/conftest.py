@@ -23,6 +23,8 @@ def tiny_config():
   """cpu_small shrunk so one jitted step takes well under a second on 2 cores."""
   config = cpu_small.get_config()
   config.progress_bar = False
+  config.data.path = ''        # each test names its data
+  config.data.eval_path = ''
   config.data.num_points = 512
   config.data.min_points = 16
   config.model.num_clusters = 64

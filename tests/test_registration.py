@@ -1,0 +1,83 @@
+"""Ground-truth files, RANSAC and registration metrics."""
+
+import numpy as np
+import pytest
+
+from ssd_jax import geometry
+from ssd_jax.data import groundtruth, io
+from ssd_jax.registration import metrics, ransac
+from ssd_jax.synthetic import trajectory
+
+
+def test_reads_reference_groundtruths(tmp_path):
+  c = np.cos(np.pi / 4)
+  (tmp_path / 'groundtruths.txt').write_text(
+      'idx1\tidx2\tt_1\tt_2\tt_3\tq_1\tq_2\tq_3\tq_4\n'
+      f'270\t456\t1.5\t-2.0\t0.25\t{c}\t0\t0\t{c}\n')
+  (pair,) = groundtruth.read_groundtruths(tmp_path / 'groundtruths.txt')
+  assert (pair.idx1, pair.idx2) == (270, 456)
+  expected = np.array([[0, -1, 0, 1.5], [1, 0, 0, -2.0], [0, 0, 1, 0.25], [0, 0, 0, 1]])
+  np.testing.assert_allclose(pair.transform, expected, atol=1e-12)
+
+
+def test_groundtruths_round_trip_and_errors(tmp_path):
+  rng = np.random.default_rng(0)
+  pairs = []
+  for i in range(5):
+    rot = trajectory.rotation_zyx(*rng.uniform(-np.pi, np.pi, 3))
+    pairs.append(groundtruth.GroundTruthPair(i, i + 1, geometry.make_transform(rot, rng.normal(size=3) * 5)))
+  path = tmp_path / 'gt.txt'
+  groundtruth.write_groundtruths(path, pairs)
+  assert path.read_text().splitlines()[0] == 'idx1\tidx2\tt_1\tt_2\tt_3\tq_1\tq_2\tq_3\tq_4'
+  back = groundtruth.read_groundtruths(path)
+  for a, b in zip(pairs, back):
+    assert (a.idx1, a.idx2) == (b.idx1, b.idx2)
+    np.testing.assert_allclose(a.transform, b.transform, atol=1e-8)
+  (tmp_path / 'bad.txt').write_text('0 1 0 0 0 1 0 0\n')
+  with pytest.raises(io.CloudFileError, match=r'bad.txt:1: expected 9 fields'):
+    groundtruth.read_groundtruths(tmp_path / 'bad.txt')
+  (tmp_path / 'bad.txt').write_text('0 1 0 0 0 2 0 0 0\n')
+  with pytest.raises(io.CloudFileError, match='not a finite unit quaternion'):
+    groundtruth.read_groundtruths(tmp_path / 'bad.txt')
+  with pytest.raises(io.CloudFileError, match='no such ground-truth file'):
+    groundtruth.read_groundtruths(tmp_path / 'missing.txt')
+
+
+@pytest.mark.parametrize('outlier_fraction', [0.5, 0.9])
+def test_ransac_recovers_known_transform(outlier_fraction):
+  rng = np.random.default_rng(1)
+  n = 300
+  t_12 = geometry.make_transform(trajectory.rotation_zyx(2.0, 0.03, -0.02), np.array([4.0, -3.0, 0.2]))
+  xyz2 = rng.uniform(-30, 30, (n, 3))
+  xyz1 = geometry.apply_transform(t_12, xyz2) + rng.normal(0, 0.05, (n, 3))
+  outliers = rng.permutation(n)[: int(outlier_fraction * n)]
+  xyz1[outliers] = rng.uniform(-30, 30, (len(outliers), 3))
+  res = ransac.ransac_sequential(xyz1, xyz2, np.random.default_rng(2))
+  err = metrics.registration_errors(t_12, res.transform)
+  assert err['rte'] < 0.05 and err['rre_geodesic'] < 0.2
+  truth = np.ones(n, bool)
+  truth[outliers] = False
+  assert (res.inliers & truth).sum() >= 0.95 * truth.sum()
+  # the adaptive rule stopped near log(0.01) / log(1 - w^3), far below the cap
+  w = res.inliers.mean()
+  assert 10 <= res.trials <= 3 * np.log(0.01) / np.log(1 - w ** 3) + 10
+
+
+def test_registration_metrics_hand_computed():
+  rz3 = geometry.make_transform(trajectory.rotation_zyx(np.radians(3.0), 0.0, 0.0),
+                                np.array([1.0, 0.0, 0.0]))
+  e = metrics.registration_errors(np.eye(4), rz3)
+  assert e['rte'] == pytest.approx(1.0) and e['rre'] == pytest.approx(3.0)
+  assert e['rre_geodesic'] == pytest.approx(3.0) and e['success']
+  # Euler-sum RRE adds |z| + |y| + |x| = 3 + 0 + 2 = 5 degrees: not a success (< 5 needed)
+  both = geometry.make_transform(trajectory.rotation_zyx(np.radians(3.0), 0.0, np.radians(2.0)),
+                                 np.zeros(3))
+  e = metrics.registration_errors(np.eye(4), both)
+  assert e['rre'] == pytest.approx(5.0) and not e['success']
+  assert e['rre_geodesic'] == pytest.approx(np.degrees(np.arccos(
+      (np.trace(both[:3, :3]) - 1) / 2)))
+  s = metrics.summarize([{'rte': 1.0, 'rre': 1.0, 'rre_geodesic': 1.0, 'success': True, 'trials': 10},
+                         {'rte': 9.0, 'rre': 90.0, 'rre_geodesic': 90.0, 'success': False,
+                          'trials': 30}])
+  assert s == {'pairs': 2, 'rte': 1.0, 'rre': 1.0, 'rre_geodesic': 1.0, 'success_rate': 0.5,
+               'trials': 20.0}

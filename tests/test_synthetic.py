@@ -1,0 +1,200 @@
+"""Synthetic data: determinism, exact ground truth, layouts, realism helpers, baseline."""
+
+import filecmp
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy import spatial
+
+from configs import synthetic
+from ssd_jax import geometry
+from ssd_jax.data import groundtruth, io, pipeline
+from ssd_jax.synthetic import dataset, lidar, realism, scene as scene_lib
+
+
+def tiny_config(seed=0):
+  config = synthetic.get_config()
+  config.seed = seed
+  config.scene_length = 80.0
+  config.lidar.azimuth_step = 0.4
+  config.train.num_scenes = 1
+  config.train.spacing = 15.0
+  config.test_kitti.num_scenes = 1
+  config.test_oxford.num_scenes = 1
+  config.test_oxford.num_points = 4096
+  config.clusters.num_scenes = 1
+  config.clusters.num_pairs = 6
+  config.clusters.min_points = 16
+  return config
+
+
+@pytest.fixture(scope='module')
+def tiny_set(tmp_path_factory):
+  out = tmp_path_factory.mktemp('synthetic') / 'tiny'
+  dataset.generate(tiny_config(), out)
+  return out
+
+
+def _files(root):
+  return sorted(os.path.relpath(os.path.join(d, f), root)
+                for d, _, fs in os.walk(root) for f in fs)
+
+
+def test_same_seed_gives_byte_identical_files(tiny_set, tmp_path):
+  again = tmp_path / 'again'
+  manifest = dataset.generate(tiny_config(), again)
+  assert not manifest['reused']
+  files = _files(tiny_set)
+  assert files == _files(again) and len(files) > 30
+  match, mismatch, errors = filecmp.cmpfiles(tiny_set, again, files, shallow=False)
+  assert not mismatch and not errors and len(match) == len(files)
+
+
+def test_different_seeds_give_different_scenes():
+  a = scene_lib.make_scene(np.random.default_rng((0, 1, 0)), 80.0)
+  b = scene_lib.make_scene(np.random.default_rng((1, 1, 0)), 80.0)
+  assert a.style != b.style
+  assert a.num_triangles != b.num_triangles
+  cfg0, cfg1 = tiny_config(0), tiny_config(1)
+  s0 = dataset.make_drive(cfg0, 'test_kitti', 0).scan(0)
+  s1 = dataset.make_drive(cfg1, 'test_kitti', 0).scan(0)
+  assert abs(len(s0) - len(s1)) > 100 or not np.allclose(np.sort(s0[:, 2])[:100],
+                                                         np.sort(s1[:, 2])[:100])
+
+
+def _overlap(cloud1, cloud2, t_12, radius=0.3):
+  """Fraction of cloud-2 points within radius of cloud 1 after mapping by T_12."""
+  dist, _ = spatial.cKDTree(cloud1).query(geometry.apply_transform(t_12, cloud2.astype(float)))
+  return float(np.mean(dist < radius))
+
+
+def test_kitti_style_pairs_overlap_under_ground_truth(tiny_set):
+  folder = tiny_set / 'test_kitti' / '00'
+  pairs = groundtruth.read_groundtruths(folder / 'groundtruths.txt')
+  assert len(pairs) >= 5
+  overlaps = []
+  for p in pairs:
+    c1, c2 = (io.read_cloud(folder / f'{i:06d}.bin') for i in (p.idx1, p.idx2))
+    assert np.linalg.norm(p.transform[:3, 3]) < 10.0
+    overlaps.append(_overlap(c1, c2, p.transform))
+  assert min(overlaps) >= 0.5, overlaps
+  # The ground truth matters: a 5 degree yaw error loses most non-ground overlap.
+  wrong = geometry.make_transform(geometry.rotation_z(np.radians(5.0)), np.zeros(3)) @ pairs[0].transform
+  c1, c2 = (io.read_cloud(folder / f'{i:06d}.bin') for i in (pairs[0].idx1, pairs[0].idx2))
+  assert _overlap(c1, c2, wrong) < overlaps[0] - 0.15
+
+
+def test_kitti_style_clouds_have_normals_and_poses(tiny_set):
+  folder = tiny_set / 'test_kitti' / '00'
+  raw = np.fromfile(folder / '000000.bin', '<f4').reshape(-1, 6)
+  assert io.detect_bin_format(raw.ravel(), 'x') == 'xyzn'
+  np.testing.assert_allclose(np.linalg.norm(raw[:, 3:], axis=1), 1.0, atol=1e-4)
+  # normals face the sensor at the origin
+  assert np.mean(np.einsum('ij,ij->i', raw[:, 3:], -raw[:, :3]) >= 0) > 0.99
+  # 0.2 m voxel grid: no two points closer than the voxel's reach allows in bulk
+  d, _ = spatial.cKDTree(raw[:, :3]).query(raw[:, :3], k=2)
+  assert np.median(d[:, 1]) > 0.1
+  poses = np.loadtxt(folder / 'poses.txt').reshape(-1, 3, 4)
+  assert len(poses) == len(list(folder.glob('*.bin')))
+  np.testing.assert_allclose(poses[:, :, :3] @ poses[:, :, :3].transpose(0, 2, 1),
+                             np.broadcast_to(np.eye(3), (len(poses), 3, 3)), atol=1e-6)
+
+
+def test_oxford_style_models(tiny_set):
+  root = tiny_set / 'test_oxford'
+  pairs = groundtruth.read_groundtruths(root / 'groundtruths.txt')
+  for p in pairs:
+    c1, c2 = (io.read_cloud(root / 'test_models' / f'{i}.bin') for i in (p.idx1, p.idx2))
+    assert c1.shape == c2.shape == (4096, 3)
+    assert np.linalg.norm(c1[:, :2], axis=1).max() < 30.0
+    assert _overlap(c1, c2, p.transform) >= 0.4
+  # models are randomly rotated: the relative yaw is not just the driving direction
+  yaws = [np.degrees(np.arctan2(p.transform[1, 0], p.transform[0, 0])) for p in pairs]
+  assert np.std(yaws) > 20
+
+
+def test_training_folder_reads_as_oxford_index(tiny_set):
+  entries = io.read_oxford_index(tiny_set / 'train' / 'train.txt')
+  poses = np.loadtxt(tiny_set / 'train' / '00' / 'poses.txt').reshape(-1, 3, 4)
+  assert len(entries) == len(poses)
+  for k, e in enumerate(entries):
+    assert k not in e.positives and set(e.positives) <= set(e.non_negatives)
+    for j in e.positives:
+      assert np.linalg.norm(poses[k, :, 3] - poses[j, :, 3]) < 10.0
+  ds = pipeline.CloudDataset.from_source(tiny_set / 'train', min_points=64)
+  assert ds.batch(0, 0, 2, 512).shape == (2, 512, 3)
+
+
+def test_cluster_pairs(tiny_set):
+  lines = (tiny_set / 'clusters' / 'filenames.txt').read_text().splitlines()
+  labels = [int(l.split()[-1]) for l in lines[1:]]
+  assert len(labels) == 6 and sum(labels) == 3
+  for i in range(6):
+    for part in (0, 1):
+      pts = io.read_cloud(tiny_set / 'clusters' / f'{i}_{part}.bin')
+      assert len(pts) >= 16 and np.linalg.norm(pts, axis=1).max() < 4.0
+
+
+def test_reuse_and_config_errors(tiny_set):
+  before = (tiny_set / 'synthetic.json').stat().st_mtime_ns
+  assert dataset.generate(tiny_config(), tiny_set)['reused']
+  assert (tiny_set / 'synthetic.json').stat().st_mtime_ns == before
+  with pytest.raises(dataset.SyntheticConfigError, match='different config'):
+    dataset.generate(tiny_config(seed=3), tiny_set)
+  bad = tiny_config()
+  bad.test_kitti.spacing = -1.0
+  with pytest.raises(dataset.SyntheticConfigError, match=r'test_kitti.spacing must be > 0'):
+    dataset.check_config(bad)
+  bad = tiny_config()
+  bad.lidar.beams = 3
+  with pytest.raises(dataset.SyntheticConfigError, match='unknown LiDAR settings'):
+    dataset.check_config(bad)
+
+
+def test_cli_reports_bad_config_without_traceback(tmp_path):
+  proc = subprocess.run(
+      [sys.executable, '-m', 'experiments.make_synthetic', f'--out={tmp_path / "x"}',
+       '--config=configs/synthetic_small.py', '--config.clusters.num_pairs=3'],
+      capture_output=True, text=True, cwd=os.path.dirname(os.path.dirname(__file__)))
+  assert proc.returncode != 0
+  assert 'error: clusters.num_pairs must be even' in proc.stderr
+  assert 'Traceback' not in proc.stderr
+
+
+def test_lidar_on_flat_ground_matches_geometry():
+  """An infinite plane seen by a perfect sensor: every return lies on it, along the beams."""
+  rng = np.random.default_rng(0)
+  verts = np.array([[-500, -500, 0], [500, -500, 0], [500, 500, 0], [-500, 500, 0]], np.float32)
+  plane = scene_lib.Scene(None, None, 0.0, {scene_lib.Label.GROUND: verts},
+                          {scene_lib.Label.GROUND: np.array([[0, 1, 2], [0, 2, 3]], np.uint32)})
+  model = lidar.LidarModel(range_noise=0.0, dropout=0.0, azimuth_step=1.0)
+  pose = np.eye(4)
+  pose[2, 3] = 1.73
+  pts, labels = lidar.scan(lidar.Raycaster(plane), pose, model, rng)
+  assert np.all(labels == scene_lib.Label.GROUND)
+  np.testing.assert_allclose(pts[:, 2], -1.73, atol=1e-3)
+  el = np.degrees(np.arctan2(pts[:, 2], np.linalg.norm(pts[:, :2], axis=1)))
+  # beams above the horizon never hit; the lowest beam is at -24.33 degrees
+  assert el.max() < 0 and abs(el.min() + 24.33) < 0.01
+  r = np.linalg.norm(pts, axis=1)
+  assert r.min() >= model.min_range and r.max() <= model.max_range
+
+
+def test_realism_statistics_on_constructed_scene():
+  rng = np.random.default_rng(0)
+  ground = np.c_[rng.uniform(-10, 10, (20000, 2)), rng.normal(-1.7, 0.01, 20000)]
+  wall = np.c_[rng.uniform(-10, 10, 2000), np.full(2000, 8.0), rng.uniform(-1.7, 3, 2000)]
+  pts = np.concatenate([ground, wall])
+  frac = realism.ground_mask(pts).mean()
+  assert 0.90 <= frac <= 0.93   # 20,000 ground + the wall's lowest 0.25 m (~5 % of 2,000)
+  feats = realism.shape_features(ground, rng, num_samples=300)
+  assert np.median(feats['planarity']) > 0.7 and np.median(feats['scattering']) < 0.01
+  pole = np.c_[rng.normal(0, 0.02, (500, 2)), rng.uniform(0, 5, 500)]
+  assert np.median(realism.shape_features(pole, rng, num_samples=100)['linearity']) > 0.9
+  hist = realism.range_histogram(np.array([[1.0, 0, 0], [7.0, 0, 0], [30.0, 0, 0], [90, 0, 0]]))
+  np.testing.assert_allclose(hist, [0.25, 0.25, 0, 0.25, 0, 0.25])
+  front = realism.front_fov(np.array([[10.0, 0, 0], [-10.0, 0, 0], [10, 10, 0], [10, 0, -5]]))
+  np.testing.assert_allclose(front, [[10.0, 0, 0]])
