@@ -149,6 +149,10 @@ def test_reuse_and_config_errors(tiny_set):
   with pytest.raises(dataset.SyntheticConfigError, match=r'test_kitti.spacing must be > 0'):
     dataset.check_config(bad)
   bad = tiny_config()
+  bad.lidar.azimuth_step = 0.0
+  with pytest.raises(dataset.SyntheticConfigError, match=r'lidar: azimuth_step must be in'):
+    dataset.check_config(bad)
+  bad = tiny_config()
   bad.lidar.beams = 3
   with pytest.raises(dataset.SyntheticConfigError, match='unknown LiDAR settings'):
     dataset.check_config(bad)

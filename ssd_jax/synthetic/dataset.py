@@ -36,6 +36,9 @@ from ssd_jax.synthetic import lidar, scene as scene_lib, trajectory
 
 SPLITS = {'train': 1, 'test_kitti': 2, 'test_oxford': 3, 'clusters': 4}
 MANIFEST = 'synthetic.json'
+# Sub-streams of a drive's seed (seed, split, scene): scan k uses 1 + k.
+_CALIBRATION_STREAM = 0
+_MODEL_ROTATION_STREAM = 1 << 30
 FORMAT_VERSION = 1
 
 
@@ -85,7 +88,8 @@ class Drive:
   def scan_with_labels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Raw scan k and the `scene.Label` of each point."""
     # One physical sensor per drive: its calibration error is the same in every scan.
-    calibration = self.model.calibration(np.random.default_rng((*self.seed, 0)))
+    calibration = self.model.calibration(
+        np.random.default_rng((*self.seed, _CALIBRATION_STREAM)))
     return lidar.scan(self.raycaster, self.poses[k], self.model,
                       np.random.default_rng((*self.seed, 1 + k)), calibration)
 
@@ -180,7 +184,7 @@ def _write_test_oxford(config, out: Path, tick) -> int:
   folder.mkdir(parents=True)
   for seq in range(cfg.num_scenes):
     drive = make_drive(config, 'test_oxford', seq)
-    rng = np.random.default_rng((int(config.seed), SPLITS['test_oxford'], seq, 0))
+    rng = np.random.default_rng((*drive.seed, _MODEL_ROTATION_STREAM))
     frames = []   # T_world_model of each written model
     for k in range(len(drive.poses)):
       points, normals = process(config, drive.scan(k))

@@ -40,6 +40,21 @@ class LidarModel:
   foliage_scatter: float = 0.3
   mount_height: float = 1.73
 
+  def __post_init__(self):
+    if self.upper_beams < 0 or self.lower_beams < 0 or self.num_beams < 1:
+      raise ValueError(f'need at least one beam, got upper_beams={self.upper_beams}, '
+                       f'lower_beams={self.lower_beams}')
+    if not 0 < self.azimuth_step <= 45:
+      raise ValueError(f'azimuth_step must be in (0, 45] degrees, got {self.azimuth_step}')
+    if not 0 <= self.min_range < self.max_range:
+      raise ValueError(f'need 0 <= min_range < max_range, got {self.min_range}, {self.max_range}')
+    for name in ('dropout', 'glass_dropout', 'foliage_dropout'):
+      if not 0 <= getattr(self, name) < 1:
+        raise ValueError(f'{name} must be in [0, 1), got {getattr(self, name)}')
+    for name in ('range_noise', 'beam_range_bias', 'beam_elevation_error', 'foliage_scatter'):
+      if getattr(self, name) < 0:
+        raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+
   @classmethod
   def from_config(cls, config) -> 'LidarModel':
     """From a ConfigDict / mapping with any subset of the field names."""
