@@ -10,9 +10,11 @@ It trains on the synthetic training folder and tracks the CF rotation error on
 the held-out synthetic Oxford-style test models. Real scans work the same way:
 `--config.data.path=../shared/data/kitti_object_velodyne`.
 
-Batch 2 x 2,048 points, 256 clusters of 32 points, 600 steps (~0.2-0.3 s/step
-on 2 cores). Expected: the training rotation error of the CF solution falls
-from several degrees at initialisation to about 1-2 degrees.
+Batch 2 x 2,048 points, 256 clusters of 32 points, 600 steps (~0.25 s/step
+on 2 cores, ~2.7 minutes). Expected on the small synthetic set (seed 0,
+measured 2026-11-23): the training CF rotation error falls from ~11.5 degrees
+(step 20) to ~5 degrees (step 600); on the held-out test models it falls from
+~4.8 degrees (step 100) to ~2.3 degrees.
 """
 
 from configs import paper
