@@ -72,8 +72,9 @@ def baseline_table(data: str, max_pairs: int, max_nn: int) -> tuple[str, dict, l
         cache[key] = (pts[kp], features.fpfh(pts, kp, max_nn=max_nn))
     (xyz1, f1), (xyz2, f2) = cache[(folder, pair.idx1)], cache[(folder, pair.idx2)]
     nn = matching.nearest_neighbour_matches(f1, f2)
-    res = ransac.ransac_sequential(xyz1.astype(np.float64), xyz2[nn].astype(np.float64),
-                                   np.random.default_rng((0, n)))
+    src = xyz2[nn].astype(np.float64)
+    samples = ransac.draw_minimal_samples(np.random.default_rng((0, n)), src, 10_001)
+    res = ransac.ransac(xyz1.astype(np.float64), src, samples)
     errs = metrics.registration_errors(pair.transform, res.transform)
     results.append({'sequence': os.path.basename(folder), 'idx1': pair.idx1, 'idx2': pair.idx2,
                     'keypoints': [len(xyz1), len(xyz2)], 'inliers': int(res.inliers.sum()),

@@ -43,24 +43,57 @@ def test_groundtruths_round_trip_and_errors(tmp_path):
     groundtruth.read_groundtruths(tmp_path / 'missing.txt')
 
 
-@pytest.mark.parametrize('outlier_fraction', [0.5, 0.9])
-def test_ransac_recovers_known_transform(outlier_fraction):
-  rng = np.random.default_rng(1)
-  n = 300
-  t_12 = geometry.make_transform(trajectory.rotation_zyx(2.0, 0.03, -0.02), np.array([4.0, -3.0, 0.2]))
+def _noisy_correspondences(rng, n, outlier_fraction):
+  t_12 = geometry.make_transform(trajectory.rotation_zyx(2.0, 0.03, -0.02),
+                                 np.array([4.0, -3.0, 0.2]))
   xyz2 = rng.uniform(-30, 30, (n, 3))
   xyz1 = geometry.apply_transform(t_12, xyz2) + rng.normal(0, 0.05, (n, 3))
   outliers = rng.permutation(n)[: int(outlier_fraction * n)]
   xyz1[outliers] = rng.uniform(-30, 30, (len(outliers), 3))
-  res = ransac.ransac_sequential(xyz1, xyz2, np.random.default_rng(2))
-  err = metrics.registration_errors(t_12, res.transform)
-  assert err['rte'] < 0.05 and err['rre_geodesic'] < 0.2
   truth = np.ones(n, bool)
   truth[outliers] = False
-  assert (res.inliers & truth).sum() >= 0.95 * truth.sum()
-  # the adaptive rule stopped near log(0.01) / log(1 - w^3), far below the cap
-  w = res.inliers.mean()
-  assert 10 <= res.trials <= 3 * np.log(0.01) / np.log(1 - w ** 3) + 10
+  return t_12, xyz1, xyz2, truth
+
+
+@pytest.mark.parametrize('outlier_fraction', [0.5, 0.9])
+def test_ransac_recovers_known_transform(outlier_fraction):
+  t_12, xyz1, xyz2, truth = _noisy_correspondences(np.random.default_rng(1), 300, outlier_fraction)
+  samples = ransac.draw_minimal_samples(np.random.default_rng(2), xyz2, 10_001)
+  for result in (ransac.ransac(xyz1, xyz2, samples), ransac.ransac_sequential(xyz1, xyz2, samples)):
+    err = metrics.registration_errors(t_12, result.transform)
+    assert err['rte'] < 0.05 and err['rre_geodesic'] < 0.2
+    assert (result.inliers & truth).sum() >= 0.95 * truth.sum()
+    # the adaptive rule stopped near log(0.01) / log(1 - w^3), far below the cap
+    w = result.inliers.mean()
+    assert 10 <= result.trials <= 3 * np.log(0.01) / np.log(1 - w ** 3) + 10
+
+
+@pytest.mark.parametrize('seed,outlier_fraction,n', [(0, 0.5, 100), (1, 0.8, 250), (2, 0.9, 300),
+                                                     (3, 0.97, 500), (4, 1.0, 40)])
+def test_parallel_ransac_trial_count_equals_sequential_rule(seed, outlier_fraction, n):
+  """Same minimal samples => same stopping point, trial count, inliers and model;
+  fully random matches run into the cap (10,001 trials)."""
+  _, xyz1, xyz2, _ = _noisy_correspondences(np.random.default_rng(seed), n, outlier_fraction)
+  samples = ransac.draw_minimal_samples(np.random.default_rng(seed + 10), xyz2, 10_001)
+  seq = ransac.ransac_sequential(xyz1, xyz2, samples)
+  par = ransac.ransac(xyz1, xyz2, samples, batch_size=128)
+  assert par.trials == seq.trials
+  np.testing.assert_array_equal(par.inliers, seq.inliers)
+  np.testing.assert_allclose(par.transform, seq.transform, atol=1e-9)
+  if outlier_fraction == 1.0:
+    assert seq.trials == 10_001
+
+
+def test_minimal_samples_are_distinct_and_not_collinear():
+  xyz = np.zeros((50, 3))
+  xyz[:, 0] = np.arange(50)     # all collinear except the last point
+  xyz[-1] = [0.0, 5.0, 0.0]
+  samples = ransac.draw_minimal_samples(np.random.default_rng(0), xyz, 200)
+  assert samples.shape == (200, 3)
+  assert np.all((samples == 49).any(1))
+  assert all(len(set(s)) == 3 for s in samples.tolist())
+  with pytest.raises(ValueError, match='collinear'):
+    ransac.draw_minimal_samples(np.random.default_rng(0), xyz[:-1], 10)
 
 
 def test_registration_metrics_hand_computed():

@@ -1,18 +1,30 @@
 """RANSAC for rigid registration from putative correspondences (REFERENCE §6).
 
-`ransac_sequential` is the reference rule (P. Kovesi's MATLAB `ransac.m`, as
-3DFeat-Net evaluates): one minimal sample of 3 correspondences per trial, a
-Kabsch fit, inliers within 1 m, and the adaptive trial count
-N = log(1 - p) / log(1 - w^3), updated after every trial that ties or beats the
-best inlier count, at least `min_trials`; it stops when trials >= N or trials >
-max_trials. The best hypothesis is refit on all its inliers.
+The rule is P. Kovesi's MATLAB `ransac.m`, as 3DFeat-Net evaluates. Each trial
+takes a minimal sample of 3 correspondences, fits it with Kabsch and counts the
+inliers within 1 m. After every trial that ties or beats the best inlier count,
+the adaptive trial count is updated to N = log(1 - p) / log(1 - w^3), at least
+`min_trials`. RANSAC stops when trials >= N or trials > max_trials. The best
+hypothesis is then refit on all its inliers.
+
+Both implementations consume the same pre-drawn sequence of minimal samples
+(`draw_minimal_samples`), so they agree trial for trial:
+  * `ransac_sequential`: the straightforward loop, numpy (the reference);
+  * `ransac`: JAX, scoring `batch_size` hypotheses at once in one jitted call and
+    replaying the sequential stopping rule over their inlier counts, so the
+    stopping point and the reported trial count are the sequential ones.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 
+import jax
+import jax.numpy as jnp
 import numpy as np
+
+from ssd_jax import cf
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,39 +45,137 @@ def kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
   return t
 
 
-def _degenerate(p: np.ndarray, eps: float = 1e-6) -> bool:
-  """Three (nearly) collinear or coincident points fix no rotation."""
-  return np.linalg.norm(np.cross(p[1] - p[0], p[2] - p[0])) < eps
+def _degenerate(p: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+  """Samples [..., 3, 3] whose points are (nearly) collinear or coincident -> [...] bool."""
+  return np.linalg.norm(np.cross(p[..., 1, :] - p[..., 0, :], p[..., 2, :] - p[..., 0, :]),
+                        axis=-1) < eps
 
 
-def ransac_sequential(xyz1: np.ndarray, xyz2: np.ndarray, rng: np.random.Generator,
-                      inlier_threshold: float = 1.0, confidence: float = 0.99,
-                      max_trials: int = 10_000, min_trials: int = 10,
-                      max_data_trials: int = 100) -> RansacResult:
-  """Correspondences xyz1[i] <-> xyz2[i] ([C, 3] metres each) -> T_12 by RANSAC."""
-  n = len(xyz1)
+def draw_minimal_samples(rng: np.random.Generator, xyz2: np.ndarray, num_trials: int) -> np.ndarray:
+  """The random minimal samples of `num_trials` trials: [T, 3] indices, three distinct
+  correspondences per trial whose cloud-2 points are not collinear (redrawn when they
+  are, as Kovesi's `maxDataTrials` loop does)."""
+  n = len(xyz2)
   if n < 3:
     raise ValueError(f'RANSAC needs at least 3 correspondences, got {n}')
+  out = np.empty((0, 3), np.int64)
+  for _ in range(100):
+    cand = rng.integers(0, n, (max(num_trials - len(out), 1) * 2 + 16, 3))
+    ok = ((cand[:, 0] != cand[:, 1]) & (cand[:, 0] != cand[:, 2]) & (cand[:, 1] != cand[:, 2]) &
+          ~_degenerate(xyz2[cand]))
+    out = np.concatenate([out, cand[ok]])[:num_trials]
+    if len(out) == num_trials:
+      return out
+  raise ValueError('RANSAC: every minimal sample is degenerate (all cloud-2 keypoints '
+                   'collinear or coincident)')
+
+
+def _adaptive_trials(score: int, n: int, confidence: float, min_trials: int) -> float:
+  w = score / n
+  p_no_outliers = min(max(1.0 - w ** 3, np.finfo(float).eps), 1.0 - np.finfo(float).eps)
+  return max(float(min_trials), np.log(1.0 - confidence) / np.log(p_no_outliers))
+
+
+def ransac_sequential(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
+                      inlier_threshold: float = 1.0, confidence: float = 0.99,
+                      max_trials: int = 10_000, min_trials: int = 10) -> RansacResult:
+  """Correspondences xyz1[i] <-> xyz2[i] ([C, 3] metres each) -> T_12, one trial at a
+  time over samples [>= max_trials + 1, 3]."""
+  n = len(xyz1)
   best_score, best_inliers, trials, needed = -1, None, 0, float(min_trials)
   while needed > trials:
-    for _ in range(max_data_trials):
-      sample = rng.choice(n, 3, replace=False)
-      if not _degenerate(xyz2[sample]):
-        break
-    model = kabsch(xyz2[sample], xyz1[sample])
+    s = samples[trials]
+    model = kabsch(xyz2[s], xyz1[s])
     residual = np.linalg.norm(xyz2 @ model[:3, :3].T + model[:3, 3] - xyz1, axis=1)
     inliers = residual < inlier_threshold
     score = int(inliers.sum())
     if score >= best_score:
       best_score, best_inliers = score, inliers
-      w = score / n
-      p_no_outliers = min(max(1.0 - w ** 3, np.finfo(float).eps), 1.0 - np.finfo(float).eps)
-      needed = max(float(min_trials), np.log(1.0 - confidence) / np.log(p_no_outliers))
+      needed = _adaptive_trials(score, n, confidence, min_trials)
     trials += 1
     if trials > max_trials:
       break
-  if best_score >= 3:
-    transform = kabsch(xyz2[best_inliers], xyz1[best_inliers])
-  else:
-    transform = np.eye(4)
+  transform = kabsch(xyz2[best_inliers], xyz1[best_inliers]) if best_score >= 3 else np.eye(4)
   return RansacResult(transform, best_inliers, trials)
+
+
+def _pair_fit(src: jax.Array, dst: jax.Array, weight: jax.Array):
+  """Weighted Kabsch of paired points src [C, 3] -> dst [C, 3], weight [C] >= 0."""
+  w = jnp.diag(weight / jnp.maximum(jnp.sum(weight), 1e-12))
+  return cf.weighted_kabsch(src, dst, w)
+
+
+@functools.partial(jax.jit, static_argnames=('threshold',))
+def _inlier_counts(xyz1, xyz2, valid, samples, *, threshold):
+  """Inlier count of each hypothesis: samples [B, 3] -> [B] int32. xyz [C, 3], valid [C]."""
+  def one(s):
+    r, t = _pair_fit(xyz2[s], xyz1[s], jnp.ones(3))
+    d2 = jnp.sum((xyz2 @ r.T + t - xyz1) ** 2, -1)
+    return jnp.sum((d2 < threshold * threshold) & valid)
+  return jax.vmap(one)(samples)
+
+
+@functools.partial(jax.jit, static_argnames=('threshold',))
+def _refit(xyz1, xyz2, valid, sample, *, threshold):
+  """Inliers of one hypothesis and the Kabsch refit on them."""
+  r, t = _pair_fit(xyz2[sample], xyz1[sample], jnp.ones(3))
+  inliers = (jnp.sum((xyz2 @ r.T + t - xyz1) ** 2, -1) < threshold * threshold) & valid
+  r, t = _pair_fit(xyz2, xyz1, inliers.astype(xyz1.dtype))
+  return r, t, inliers
+
+
+def _bucket(n: int, smallest: int = 256) -> int:
+  return max(smallest, 1 << (n - 1).bit_length())
+
+
+def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
+           inlier_threshold: float = 1.0, confidence: float = 0.99, max_trials: int = 10_000,
+           min_trials: int = 10, batch_size: int = 512, x64: bool = True) -> RansacResult:
+  """`ransac_sequential`'s result, scoring `batch_size` hypotheses per jitted call.
+
+  Correspondences are padded to a power-of-two bucket (masked), so clouds with
+  different match counts reuse a few compiled kernels. Batches after the one in
+  which the sequential rule stops are never computed. With `x64` the kernels run
+  in float64, like the reference: in float32 a residual within ~1e-5 m of the
+  threshold may count differently and change the trial count.
+  """
+  with jax.enable_x64(x64):
+    return _ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials, min_trials,
+                   batch_size, np.float64 if x64 else np.float32)
+
+
+def _ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials, min_trials,
+            batch_size, dtype) -> RansacResult:
+  n = len(xyz1)
+  size = _bucket(n)
+  pad = lambda a: np.concatenate([a, np.zeros((size - n, 3))]).astype(dtype)
+  x1, x2 = jnp.asarray(pad(xyz1)), jnp.asarray(pad(xyz2))
+  valid = jnp.asarray(np.arange(size) < n)
+  best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)
+  stop = False
+  while not stop:
+    batch = samples[trials: trials + batch_size]
+    if len(batch) < batch_size:
+      batch = np.concatenate([batch, np.repeat(batch[-1:], batch_size - len(batch), 0)])
+    counts = np.asarray(_inlier_counts(x1, x2, valid, jnp.asarray(batch, jnp.int32),
+                                       threshold=float(inlier_threshold)))
+    for score in counts.tolist():  # replay the sequential rule, trial by trial
+      if not needed > trials:
+        stop = True
+        break
+      if score >= best_score:
+        best_score, best_trial = score, trials
+        needed = _adaptive_trials(score, n, confidence, min_trials)
+      trials += 1
+      if trials > max_trials:
+        stop = True
+        break
+    stop = stop or not needed > trials
+  r, t, inliers = _refit(x1, x2, valid, jnp.asarray(samples[best_trial], jnp.int32),
+                         threshold=float(inlier_threshold))
+  inliers = np.asarray(inliers)[:n]
+  if best_score < 3:
+    return RansacResult(np.eye(4), inliers, trials)
+  transform = np.eye(4)
+  transform[:3, :3], transform[:3, 3] = np.asarray(r, np.float64), np.asarray(t, np.float64)
+  return RansacResult(transform, inliers, trials)
