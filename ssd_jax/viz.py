@@ -53,3 +53,34 @@ def plot_scan(points: np.ndarray, path: str | os.PathLike, title: str = '',
     fig.suptitle(title)
   fig.savefig(path, dpi=110, bbox_inches='tight')
   plt.close(fig)
+
+
+def plot_registration(points1: np.ndarray, points2: np.ndarray, kp1: np.ndarray,
+                      kp2: np.ndarray, inliers: np.ndarray, path: str | os.PathLike,
+                      title: str = '', max_points: int = 40_000, max_lines: int = 300,
+                      seed: int = 0) -> None:
+  """Both clouds from the top, side by side, with inlier matches as lines (paper Figs. 5-6).
+
+  points1 [N1, 3], points2 [N2, 3] metres in their own frames; kp1 [M, 3], kp2 [M, 3]
+  the matched keypoints; inliers [M] bool.
+  """
+  plt = _pyplot()
+  rng = np.random.default_rng(seed)
+  sub = lambda p: p[rng.choice(len(p), min(len(p), max_points), replace=False)]
+  p1, p2 = sub(points1), sub(points2)
+  shift = np.array([np.ptp(p1[:, 0]) * 0.5 + np.ptp(p2[:, 0]) * 0.5 + 10.0,
+                    p1[:, 1].mean() - p2[:, 1].mean()]) + p1[:, :2].mean(0) - p2[:, :2].mean(0)
+  fig, ax = plt.subplots(figsize=(14, 6))
+  ax.scatter(p1[:, 0], p1[:, 1], s=0.2, c='tab:blue', linewidths=0)
+  ax.scatter(p2[:, 0] + shift[0], p2[:, 1] + shift[1], s=0.2, c='tab:orange', linewidths=0)
+  idx = np.flatnonzero(inliers)
+  idx = idx[rng.permutation(len(idx))[:max_lines]]
+  for i in idx:
+    ax.plot([kp1[i, 0], kp2[i, 0] + shift[0]], [kp1[i, 1], kp2[i, 1] + shift[1]], '-',
+            color='tab:green', lw=0.5, alpha=0.7)
+  ax.set_aspect('equal')
+  ax.set_xlabel('x (m)')
+  ax.set_ylabel('y (m)')
+  ax.set_title(title or f'{int(inliers.sum())} inlier matches of {len(inliers)}')
+  fig.savefig(path, dpi=100, bbox_inches='tight')
+  plt.close(fig)

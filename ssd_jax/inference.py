@@ -1,0 +1,203 @@
+"""Inference: descriptors at keypoints and attention keypoints of whole clouds.
+
+    model = inference.load(checkpoint_dir)                       # or inference.Model(...)
+    desc = inference.describe(model, cloud, keypoint_xyz)         # [K, D]
+    kp_idx, attention = inference.detect(model, cloud)            # 3DFeat-Net keypoints
+
+The network runs jitted on clusters of a fixed chunk size (the last chunk is
+padded and its outputs dropped), and clouds are padded to power-of-two size
+buckets (masked), so a stream of clouds and keypoint sets of any size compiles
+once per bucket, not once per cloud. Neighbourhoods are PointNet++ ball queries (the first c
+points within r in index order, padded by repeating the first). Two paths give
+identical results:
+  * 'kdtree': a host KD-tree (scipy) finds the neighbours, far faster on CPU for
+    large clouds (REFERENCE §10);
+  * 'dense': `grouping.ball_query` in JAX, a dense [chunk, N] distance matrix,
+    with the cloud padded to a power-of-two bucket.
+Clouds are put in a seeded random order first, so that "first c in index
+order" is a random sample of the ball, as in training.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import os
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import ml_collections
+import numpy as np
+from scipy import spatial
+
+from ssd_jax import checkpoint, grouping, network
+
+SEARCHES = ('kdtree', 'dense')
+
+
+@dataclasses.dataclass(frozen=True)
+class Model:
+  """A FeatureNet with its variables and grouping settings.
+
+  Attributes:
+    net: the Flax module.
+    variables: {'params', 'batch_stats'}.
+    radius: ball-query radius, metres.
+    num_samples: points per cluster (c).
+  """
+  net: network.FeatureNet
+  variables: Any
+  radius: float = 2.0
+  num_samples: int = 64
+
+  @classmethod
+  def from_config(cls, config: ml_collections.ConfigDict, variables) -> 'Model':
+    net = network.FeatureNet(descriptor_dim=config.model.descriptor_dim,
+                             bn_momentum=config.model.bn_momentum)
+    return cls(net, variables, float(config.model.radius), int(config.model.num_samples))
+
+
+def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
+  """The model of a training run: `checkpoint_dir` is its workdir or its `checkpoints/`."""
+  from ssd_jax import train  # pylint: disable=g-import-not-at-top
+  directory = os.path.join(checkpoint_dir, 'checkpoints')
+  if not os.path.isdir(directory):
+    directory = str(checkpoint_dir)
+  if not os.path.isdir(directory):
+    raise FileNotFoundError(f'{checkpoint_dir}: no such checkpoint directory')
+  ckpt = checkpoint.Checkpointer(directory, asynchronous=False)
+  if ckpt.latest_step() is None:
+    raise FileNotFoundError(f'{directory}: holds no checkpoint')
+  config = ml_collections.ConfigDict(ckpt.restore_config(step))
+  abstract = checkpoint.abstract_like(
+      jax.eval_shape(lambda: train.create_train_state(config, jax.random.key(0))))
+  state, _ = ckpt.restore(abstract, step)
+  ckpt.close()
+  return Model.from_config(config, {'params': state.params, 'batch_stats': state.batch_stats})
+
+
+def _bucket(n: int, smallest: int = 1024) -> int:
+  return max(smallest, 1 << (max(n, 1) - 1).bit_length())
+
+
+def check_cloud(points: np.ndarray, name: str = 'cloud') -> np.ndarray:
+  """[N, 3] finite float32, or a clear error."""
+  points = np.asarray(points, np.float32)
+  if points.ndim != 2 or points.shape[1] != 3:
+    raise ValueError(f'{name}: expected points of shape [N, 3], got {points.shape}')
+  if len(points) == 0:
+    raise ValueError(f'{name}: the cloud is empty')
+  if not np.all(np.isfinite(points)):
+    raise ValueError(f'{name}: {int((~np.isfinite(points).all(1)).sum())} points have NaN/Inf '
+                     'coordinates; drop them first (ssd_jax.data.pipeline.clean_cloud)')
+  return points
+
+
+def shuffled(points: np.ndarray, seed: int = 0) -> np.ndarray:
+  """The cloud in a seeded random order (see the module docstring)."""
+  return points[np.random.default_rng(seed).permutation(len(points))]
+
+
+def kdtree_neighbourhoods(points: np.ndarray, centers: np.ndarray, radius: float,
+                          num_samples: int) -> tuple[np.ndarray, np.ndarray]:
+  """Host ball query with `grouping.ball_query` semantics.
+
+  points [N, 3], centers [K, 3] -> idx [K, c] int32, has_neighbour [K] bool.
+  """
+  tree = spatial.cKDTree(points)
+  # cKDTree tests d <= r; ball_query tests d^2 < r^2. Shrinking r by one ulp makes
+  # the boundary case agree.
+  lists = tree.query_ball_point(centers, np.nextafter(radius, 0), return_sorted=True)
+  idx = np.zeros((len(centers), num_samples), np.int32)
+  has = np.zeros(len(centers), bool)
+  for k, nb in enumerate(lists):
+    if nb:
+      take = nb[:num_samples]
+      idx[k, :len(take)] = take
+      idx[k, len(take):] = take[0]
+      has[k] = True
+  return idx, has
+
+
+@functools.partial(jax.jit, static_argnames=('net', 'radius', 'what'))
+def _run_on_groups(net, variables, points, centers, idx, has_nb, *, radius, what):
+  clusters = grouping.group_points(points, centers, idx, has_nb, radius)
+  if what == 'describe':
+    return net.apply(variables, clusters, train=False)[0]
+  return net.apply(variables, clusters, train=False, method=network.FeatureNet.detect)
+
+
+@functools.partial(jax.jit, static_argnames=('radius', 'num_samples'))
+def _dense_neighbourhoods(points, valid, centers, *, radius, num_samples):
+  return grouping.ball_query(points, centers, radius, num_samples, valid)
+
+
+def _chunks(model: Model, points: np.ndarray, centers: np.ndarray, what: str, search: str,
+            chunk: int):
+  """Run the network on the clusters at `centers`, `chunk` at a time."""
+  if search not in SEARCHES:
+    raise ValueError(f'search must be one of {SEARCHES}, got {search!r}')
+  n = len(points)
+  size = _bucket(n)
+  padded = np.zeros((size, 3), np.float32)
+  padded[:n] = points
+  pts, valid = jnp.asarray(padded), jnp.asarray(np.arange(size) < n)
+  outputs = []
+  for start in range(0, len(centers), chunk):
+    ctr = np.zeros((chunk, 3), np.float32)
+    part = centers[start:start + chunk]
+    ctr[:len(part)] = part
+    if search == 'dense':
+      idx, has = _dense_neighbourhoods(pts, valid, jnp.asarray(ctr), radius=model.radius,
+                                       num_samples=model.num_samples)
+    else:
+      idx, has = kdtree_neighbourhoods(points, ctr, model.radius, model.num_samples)
+    out = _run_on_groups(model.net, model.variables, pts, jnp.asarray(ctr), jnp.asarray(idx),
+                         jnp.asarray(has), radius=model.radius, what=what)
+    outputs.append(jax.tree.map(lambda a, m=len(part): np.asarray(a)[:m], out))
+  return outputs
+
+
+def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: str = 'kdtree',
+             chunk: int = 512, seed: int = 0) -> np.ndarray:
+  """Learned descriptors at keypoints.
+
+  points [N, 3] metres (the search surface); keypoints [K, 3] metres (cluster
+  centers) -> [K, D] float32, L2-normalised.
+  """
+  points = shuffled(check_cloud(points), seed)
+  keypoints = check_cloud(keypoints, 'keypoints')
+  return np.concatenate(_chunks(model, points, keypoints, 'describe', search, chunk))
+
+
+def attention(model: Model, points: np.ndarray, search: str = 'kdtree', chunk: int = 2048,
+              seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+  """Attention [N] and orientation [N] (radians) with every point as a cluster center."""
+  points = check_cloud(points)
+  order = np.random.default_rng(seed).permutation(len(points))
+  parts = _chunks(model, points[order], points, 'detect', search, chunk)
+  return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+
+
+def non_max_suppression(points: np.ndarray, scores: np.ndarray, radius: float = 0.5,
+                        min_ratio: float = 0.01, max_keypoints: int = 1024) -> np.ndarray:
+  """3DFeat-Net keypoints (REFERENCE §4): points whose score is the highest within
+  `radius` metres, at least `min_ratio` of the maximum, the strongest `max_keypoints`
+  first. -> indices [K]."""
+  pairs = spatial.cKDTree(points).query_pairs(radius, output_type='ndarray')
+  best = scores.copy()
+  if len(pairs):
+    np.maximum.at(best, pairs[:, 0], scores[pairs[:, 1]])
+    np.maximum.at(best, pairs[:, 1], scores[pairs[:, 0]])
+  keep = np.flatnonzero((scores >= best) & (scores >= min_ratio * scores.max()))
+  return keep[np.argsort(-scores[keep], kind='stable')][:max_keypoints]
+
+
+def detect(model: Model, points: np.ndarray, nms_radius: float = 0.5, min_ratio: float = 0.01,
+           max_keypoints: int = 1024, search: str = 'kdtree',
+           chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+  """Attention keypoints: indices [K] into points (strongest first) and attention [N]."""
+  att, _ = attention(model, points, search, chunk)
+  return non_max_suppression(np.asarray(points, np.float32), att, nms_radius, min_ratio,
+                             max_keypoints), att

@@ -1,0 +1,112 @@
+"""Register two clouds: keypoints -> descriptors -> matches -> RANSAC (-> ICP).
+
+Each stage is its own function, as in Open3D's registration pipeline, so an
+evaluation can cache per-cloud keypoints and descriptors and only match and
+estimate per pair.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ssd_jax.registration import features, keypoints as keypoints_lib, matching, ransac
+
+KEYPOINTS = ('iss', 'learned', 'random')
+DESCRIPTORS = ('fpfh', 'learned')
+
+
+@dataclasses.dataclass
+class CloudFeatures:
+  """Keypoints of one cloud and their descriptors."""
+  xyz: np.ndarray          # [K, 3] metres
+  descriptors: np.ndarray  # [K, D]
+  seconds: dict
+
+
+@dataclasses.dataclass
+class Registration:
+  transform: np.ndarray    # [4, 4] T_12: maps cloud 2 into cloud 1's frame
+  matches: np.ndarray      # [K1, 2] (keypoint of cloud 1, matched keypoint of cloud 2)
+  inliers: np.ndarray      # [K1] bool
+  trials: int
+  seconds: dict
+
+
+def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0,
+                      num_random: int = 1024) -> np.ndarray:
+  """Keypoint indices into points [N, 3]: ISS (REFERENCE §4), learned attention +
+  NMS (needs a detector-trained `inference.Model`), or `num_random` random points."""
+  if method == 'iss':
+    return keypoints_lib.iss(points)
+  if method == 'random':
+    return keypoints_lib.random_keypoints(np.random.default_rng(seed), len(points), num_random)
+  if method == 'learned':
+    if model is None:
+      raise ValueError('learned keypoints need a model (--checkpoint)')
+    from ssd_jax import inference  # pylint: disable=g-import-not-at-top
+    return inference.detect(model, points)[0]
+  raise ValueError(f'keypoints must be one of {KEYPOINTS}, got {method!r}')
+
+
+def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: str,
+                        model=None, search: str = 'kdtree') -> np.ndarray:
+  """[K, D] descriptors at points[keypoint_idx]: FPFH (REFERENCE §5) or learned."""
+  if method == 'fpfh':
+    return features.fpfh(points, keypoint_idx)
+  if method == 'learned':
+    if model is None:
+      raise ValueError('learned descriptors need a model (--checkpoint)')
+    from ssd_jax import inference  # pylint: disable=g-import-not-at-top
+    return inference.describe(model, points, points[keypoint_idx], search=search)
+  raise ValueError(f'descriptor must be one of {DESCRIPTORS}, got {method!r}')
+
+
+def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str = 'fpfh',
+                   model=None, seed: int = 0) -> CloudFeatures:
+  t0 = time.perf_counter()
+  idx = compute_keypoints(points, keypoints, model, seed)
+  t1 = time.perf_counter()
+  desc = compute_descriptors(points, idx, descriptor, model)
+  t2 = time.perf_counter()
+  return CloudFeatures(points[idx], desc, {'keypoints': t1 - t0, 'descriptors': t2 - t1})
+
+
+def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_threshold: float = 1.0,
+             confidence: float = 0.99, max_trials: int = 10_000) -> Registration:
+  """Nearest-neighbour matches of cloud 1's keypoints among cloud 2's, then RANSAC."""
+  if len(f1.xyz) < 3 or len(f2.xyz) < 3:
+    raise ValueError(f'too few keypoints to register ({len(f1.xyz)} and {len(f2.xyz)}; at '
+                     'least 3 each): is the cloud degenerate (empty, planar or collinear)?')
+  t0 = time.perf_counter()
+  nn = matching.nearest_neighbour_matches(f1.descriptors, f2.descriptors)
+  xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[nn].astype(np.float64)
+  t1 = time.perf_counter()
+  samples = ransac.draw_minimal_samples(np.random.default_rng(seed), xyz2, max_trials + 1)
+  res = ransac.ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials)
+  t2 = time.perf_counter()
+  return Registration(res.transform, np.stack([np.arange(len(nn)), nn], 1), res.inliers,
+                      res.trials, {'matching': t1 - t0, 'ransac': t2 - t1})
+
+
+def refine_icp(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
+               max_distance: float = 1.0) -> tuple[np.ndarray, float]:
+  """Point-to-point ICP (Open3D) from `transform`: -> (T_12, fitness in [0, 1])."""
+  import open3d as o3d  # pylint: disable=g-import-not-at-top
+  pcd = lambda p: o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(p, np.float64)))
+  result = o3d.pipelines.registration.registration_icp(
+      pcd(points2), pcd(points1), max_distance, np.asarray(transform, np.float64),
+      o3d.pipelines.registration.TransformationEstimationPointToPoint(),
+      o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=50))
+  return np.asarray(result.transformation), float(result.fitness)
+
+
+def overlap_fitness(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
+                    max_distance: float = 0.5) -> float:
+  """Fraction of cloud-2 points within max_distance of cloud 1 after T_12."""
+  from scipy import spatial  # pylint: disable=g-import-not-at-top
+  moved = np.asarray(points2, np.float64) @ transform[:3, :3].T + transform[:3, 3]
+  dist, _ = spatial.cKDTree(points1).query(moved, distance_upper_bound=max_distance)
+  return float(np.mean(np.isfinite(dist)))

@@ -1,0 +1,111 @@
+"""Inference API: both neighbourhood paths agree, size buckets, NMS, checkpoints."""
+
+import jax
+import numpy as np
+import pytest
+
+from ssd_jax import grouping, inference, train
+
+
+@pytest.fixture(scope='module')
+def model():
+  from configs import cpu_small  # pylint: disable=g-import-not-at-top
+  config = cpu_small.get_config()
+  config.model.num_samples = 16
+  state = train.create_train_state(config, jax.random.key(0))
+  return inference.Model.from_config(config, {'params': state.params,
+                                              'batch_stats': state.batch_stats})
+
+
+def _cloud(rng, n):
+  ground = np.c_[rng.uniform(-15, 15, (n // 2, 2)), rng.normal(-1.7, 0.02, n // 2)]
+  walls = np.c_[rng.uniform(-15, 15, n - n // 2), rng.choice([-6.0, 7.0], n - n // 2),
+                rng.uniform(-1.7, 2.0, n - n // 2)]
+  return np.concatenate([ground, walls]).astype(np.float32)
+
+
+def test_kdtree_neighbourhoods_equal_ball_query():
+  rng = np.random.default_rng(0)
+  pts = rng.uniform(-3, 3, (2000, 3)).astype(np.float32)
+  centers = np.concatenate([pts[:50], rng.uniform(-3, 3, (10, 3)), [[100.0, 0, 0]]]).astype(np.float32)
+  idx, has = inference.kdtree_neighbourhoods(pts, centers, 1.0, 32)
+  ref_idx, ref_has = grouping.ball_query(pts, centers, 1.0, 32)
+  np.testing.assert_array_equal(has, np.asarray(ref_has))
+  np.testing.assert_array_equal(idx[has], np.asarray(ref_idx)[has])
+  assert not has[-1]
+
+
+def test_kdtree_and_dense_paths_give_identical_results(model):
+  rng = np.random.default_rng(1)
+  pts = _cloud(rng, 3000)
+  kp = pts[rng.choice(len(pts), 100, replace=False)]
+  a = inference.describe(model, pts, kp, search='kdtree', chunk=64)
+  b = inference.describe(model, pts, kp, search='dense', chunk=64)
+  assert a.shape == (100, 32)
+  np.testing.assert_allclose(np.linalg.norm(a, axis=1), 1.0, atol=1e-5)
+  np.testing.assert_array_equal(a, b)
+  att_a, ori_a = inference.attention(model, pts, search='kdtree', chunk=512)
+  att_b, ori_b = inference.attention(model, pts, search='dense', chunk=512)
+  np.testing.assert_array_equal(att_a, att_b)
+  np.testing.assert_array_equal(ori_a, ori_b)
+  assert att_a.shape == (3000,) and np.all(att_a >= 0)
+
+
+def test_stream_of_clouds_compiles_once_per_bucket(model):
+  rng = np.random.default_rng(2)
+  inference.describe(model, _cloud(rng, 1500), _cloud(rng, 40), chunk=64)
+  before = inference._run_on_groups._cache_size()
+  for n, k in [(1100, 10), (1800, 64), (2000, 100), (1300, 3)]:   # all in the 2048 bucket
+    out = inference.describe(model, _cloud(rng, n), _cloud(rng, k), chunk=64)
+    assert out.shape == (k, 32)
+  assert inference._run_on_groups._cache_size() == before
+  inference.describe(model, _cloud(rng, 5000), _cloud(rng, 10), chunk=64)   # 8192 bucket
+  assert inference._run_on_groups._cache_size() == before + 1
+
+
+def test_non_max_suppression_hand_computed():
+  pts = np.array([[0.0, 0, 0], [0.3, 0, 0], [0.6, 0, 0], [5.0, 0, 0], [10.0, 0, 0]])
+  scores = np.array([1.0, 3.0, 2.0, 0.5, 0.01])
+  # 1 beats its neighbours 0 and 2; 2's neighbour 1 is higher; 3 is alone;
+  # 4 is alone but below 1 % of the maximum (0.03).
+  np.testing.assert_array_equal(inference.non_max_suppression(pts, scores), [1, 3])
+  np.testing.assert_array_equal(inference.non_max_suppression(pts, scores, max_keypoints=1), [1])
+
+
+def test_detect_returns_strongest_isolated_points(model):
+  pts = _cloud(np.random.default_rng(3), 2500)
+  idx, att = inference.detect(model, pts, max_keypoints=50, chunk=512)
+  assert 0 < len(idx) <= 50 and len(set(idx.tolist())) == len(idx)
+  assert np.all(np.diff(att[idx]) <= 0)
+  d = np.linalg.norm(pts[idx][:, None] - pts[idx][None], axis=-1) + np.eye(len(idx)) * 9
+  assert d.min() > 0.5
+
+
+def test_bad_clouds_are_refused(model):
+  with pytest.raises(ValueError, match='cloud is empty'):
+    inference.describe(model, np.zeros((0, 3)), np.zeros((1, 3)))
+  bad = _cloud(np.random.default_rng(4), 100)
+  bad[5] = np.nan
+  with pytest.raises(ValueError, match='1 points have NaN/Inf'):
+    inference.attention(model, bad)
+  with pytest.raises(ValueError, match='search must be one of'):
+    inference.describe(model, _cloud(np.random.default_rng(4), 100), np.zeros((1, 3)),
+                       search='octree')
+
+
+def test_load_restores_a_training_run(tiny_config, tmp_path):
+  rng = np.random.default_rng(5)
+  for i in range(3):
+    np.save(tmp_path / f'{i}.npy', _cloud(rng, 1200))
+  tiny_config.data.path = str(tmp_path)
+  tiny_config.train.num_steps = 2
+  state = train.train_and_evaluate(tiny_config, str(tmp_path / 'run'))
+  loaded = inference.load(tmp_path / 'run')
+  assert loaded.num_samples == tiny_config.model.num_samples
+  direct = inference.Model.from_config(tiny_config, {'params': state.params,
+                                                     'batch_stats': state.batch_stats})
+  pts = _cloud(rng, 1500)
+  np.testing.assert_array_equal(inference.describe(loaded, pts, pts[:20]),
+                                inference.describe(direct, pts, pts[:20]))
+  with pytest.raises(FileNotFoundError, match='no such checkpoint directory'):
+    inference.load(tmp_path / 'nothing')
