@@ -1,0 +1,60 @@
+"""Registration test sets: pairs of cloud files with their ground-truth T_12.
+
+Layouts (REFERENCE §6, §9), all with 3DFeat-Net's `groundtruths.txt`:
+  * Oxford: ROOT/groundtruths.txt and ROOT/test_models/<idx>.bin;
+  * processed KITTI: ROOT/<seq>/groundtruths.txt and ROOT/<seq>/%06d.bin, or a
+    single such sequence folder ROOT/groundtruths.txt + ROOT/%06d.bin.
+The synthetic `test_oxford/` and `test_kitti/` folders use the same layouts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ssd_jax.data import groundtruth
+from ssd_jax.data.io import CloudFileError
+
+
+@dataclasses.dataclass(frozen=True)
+class RegistrationPair:
+  sequence: str
+  idx1: int
+  idx2: int
+  cloud1: Path
+  cloud2: Path
+  transform: np.ndarray   # [4, 4] T_12
+
+
+def _cloud_path(folder: Path, idx: int) -> Path:
+  for name in (f'{idx:06d}.bin', f'{idx}.bin'):
+    if (folder / name).is_file():
+      return folder / name
+  raise CloudFileError(f'{folder}: no cloud file for index {idx} ({idx:06d}.bin or {idx}.bin)')
+
+
+def _pairs_in(folder: Path, gt_file: Path, sequence: str) -> list[RegistrationPair]:
+  return [RegistrationPair(sequence, p.idx1, p.idx2, _cloud_path(folder, p.idx1),
+                           _cloud_path(folder, p.idx2), p.transform)
+          for p in groundtruth.read_groundtruths(gt_file)]
+
+
+def read_registration_set(root: str | os.PathLike) -> list[RegistrationPair]:
+  """Every pair of an Oxford-, KITTI- or sequence-folder-layout test set."""
+  root = Path(root)
+  if not root.is_dir():
+    raise CloudFileError(f'{root}: no such test-set directory')
+  if (root / 'groundtruths.txt').is_file():
+    folder = root / 'test_models' if (root / 'test_models').is_dir() else root
+    return _pairs_in(folder, root / 'groundtruths.txt', root.name)
+  pairs = []
+  for seq in sorted(p for p in root.iterdir() if (p / 'groundtruths.txt').is_file()):
+    pairs += _pairs_in(seq, seq / 'groundtruths.txt', seq.name)
+  if not pairs:
+    raise CloudFileError(f'{root}: no groundtruths.txt here or in its sub-folders; expected an '
+                         'Oxford (test_models/ + groundtruths.txt) or KITTI (<seq>/groundtruths.txt)'
+                         ' test set')
+  return pairs
