@@ -18,6 +18,7 @@ from ml_collections import config_flags
 from tqdm import auto as tqdm
 
 from ssd_jax.data import benchmarks, io, pipeline as data_pipeline
+from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import metrics, pipeline
 
 FLAGS = flags.FLAGS
@@ -63,6 +64,7 @@ def load_models(config, rows):
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
+  quiet_libraries()
   config = FLAGS.config
   rows = list(config.rows)
   for row in rows:

@@ -19,6 +19,7 @@ from absl import flags
 import numpy as np
 
 from ssd_jax.data import groundtruth, io, pipeline as data_pipeline
+from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import metrics, pipeline
 
 FLAGS = flags.FLAGS
@@ -53,6 +54,7 @@ def _ground_truth(path, cloud1, cloud2):
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
+  quiet_libraries()
   bad = [d for d in FLAGS.descriptor if d not in pipeline.DESCRIPTORS]
   if bad:
     raise SystemExit(f'error: --descriptor must be among {pipeline.DESCRIPTORS}, got {bad}')
