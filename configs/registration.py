@@ -30,4 +30,5 @@ def get_config() -> ml_collections.ConfigDict:
   config.inlier_threshold = 1.0   # metres
   config.confidence = 0.99
   config.max_trials = 10_000
+  config.fpfh_max_nn = 1000       # neighbour cap of FPFH's 4 m searches
   return config

@@ -94,7 +94,8 @@ def main(argv):
                                                    models.get(kp), config.seed)
       idx = feats[kp_key]
       desc_method = 'learned' if desc in models else desc
-      d = pipeline.compute_descriptors(pts, idx, desc_method, models.get(desc))
+      d = pipeline.compute_descriptors(pts, idx, desc_method, models.get(desc),
+                                       fpfh_max_nn=config.fpfh_max_nn)
       feats[key] = pipeline.CloudFeatures(pts[idx], d, {})
     return feats[key]
 

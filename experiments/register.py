@@ -32,6 +32,7 @@ flags.DEFINE_string('checkpoint', None, 'Training workdir (or its checkpoints/) 
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding this pair (optional).')
 flags.DEFINE_bool('icp', False, 'Refine with point-to-point ICP (Open3D) after RANSAC.')
 flags.DEFINE_integer('seed', 0, 'RANSAC / random-keypoint seed.')
+flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m normal / FPFH searches.')
 flags.DEFINE_string('json', None, 'Write the results here.')
 flags.DEFINE_string('plot', None, 'Draw the clouds and inlier matches here (PNG).')
 flags.mark_flags_as_required(['cloud1', 'cloud2'])
@@ -75,8 +76,8 @@ def main(argv):
   for descriptor in FLAGS.descriptor:
     try:
       start = time.perf_counter()
-      f1, f2 = (pipeline.cloud_features(c, FLAGS.keypoints, descriptor, model, FLAGS.seed)
-                for c in clouds)
+      f1, f2 = (pipeline.cloud_features(c, FLAGS.keypoints, descriptor, model, FLAGS.seed,
+                                        FLAGS.fpfh_max_nn) for c in clouds)
       reg = pipeline.estimate(f1, f2, FLAGS.seed)
     except ValueError as e:
       raise SystemExit(f'error: {e}') from None

@@ -6,7 +6,7 @@ import logging as py_logging
 
 from absl import logging
 
-_NOISY = ('/orbax/', '/tensorstore/', '/etils/')
+_NOISY = ('/orbax/', '/tensorstore/', '/etils/', 'xla_bridge.py')
 
 
 class _LibraryFilter(py_logging.Filter):

@@ -5,10 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 FPFH_RADIUS = 4.0  # REFERENCE §5: normals and FPFH both within 4 m.
+# Neighbour cap of the 4 m searches: ~the 90th percentile of 4 m neighbourhood sizes
+# in a 0.2 m-voxel KITTI scan, so nearly an uncapped radius search (PCL's), at ~11 s
+# per 30k-point cloud on 2 cores; 200 is ~10x faster and rounds the normals off less.
+FPFH_MAX_NN = 1000
 
 
 def fpfh(points: np.ndarray, keypoints: np.ndarray, radius: float = FPFH_RADIUS,
-         normals: np.ndarray | None = None, max_nn: int = 1000) -> np.ndarray:
+         normals: np.ndarray | None = None, max_nn: int = FPFH_MAX_NN) -> np.ndarray:
   """FPFH (Open3D) at points[keypoints] with the whole cloud as the search surface.
 
   points [N, 3] metres; keypoints [K] indices; normals [N, 3] or None to estimate

@@ -52,10 +52,11 @@ def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0
 
 
 def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: str,
-                        model=None, search: str = 'kdtree') -> np.ndarray:
+                        model=None, search: str = 'kdtree',
+                        fpfh_max_nn: int = features.FPFH_MAX_NN) -> np.ndarray:
   """[K, D] descriptors at points[keypoint_idx]: FPFH (REFERENCE §5) or learned."""
   if method == 'fpfh':
-    return features.fpfh(points, keypoint_idx)
+    return features.fpfh(points, keypoint_idx, max_nn=fpfh_max_nn)
   if method == 'learned':
     if model is None:
       raise ValueError('learned descriptors need a model (--checkpoint)')
@@ -65,11 +66,12 @@ def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: st
 
 
 def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str = 'fpfh',
-                   model=None, seed: int = 0) -> CloudFeatures:
+                   model=None, seed: int = 0,
+                   fpfh_max_nn: int = features.FPFH_MAX_NN) -> CloudFeatures:
   t0 = time.perf_counter()
   idx = compute_keypoints(points, keypoints, model, seed)
   t1 = time.perf_counter()
-  desc = compute_descriptors(points, idx, descriptor, model)
+  desc = compute_descriptors(points, idx, descriptor, model, fpfh_max_nn=fpfh_max_nn)
   t2 = time.perf_counter()
   return CloudFeatures(points[idx], desc, {'keypoints': t1 - t0, 'descriptors': t2 - t1})
 
