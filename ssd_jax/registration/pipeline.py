@@ -95,14 +95,23 @@ def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_thresho
 
 def refine_icp(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
                max_distance: float = 1.0) -> tuple[np.ndarray, float]:
-  """Point-to-point ICP (Open3D) from `transform`: -> (T_12, fitness in [0, 1])."""
+  """Point-to-plane ICP (Open3D) from `transform`, at max_distance then half of it.
+
+  points1 is the target (normals estimated within 1 m), points2 the source.
+  -> (T_12, fitness in [0, 1]: share of cloud-2 points with a partner).
+  """
   import open3d as o3d  # pylint: disable=g-import-not-at-top
+  reg = o3d.pipelines.registration
   pcd = lambda p: o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(p, np.float64)))
-  result = o3d.pipelines.registration.registration_icp(
-      pcd(points2), pcd(points1), max_distance, np.asarray(transform, np.float64),
-      o3d.pipelines.registration.TransformationEstimationPointToPoint(),
-      o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=50))
-  return np.asarray(result.transformation), float(result.fitness)
+  target = pcd(points1)
+  target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=1.0, max_nn=30))
+  source, t = pcd(points2), np.asarray(transform, np.float64)
+  for dist in (max_distance, max_distance / 2):
+    result = reg.registration_icp(source, target, dist, t,
+                                  reg.TransformationEstimationPointToPlane(),
+                                  reg.ICPConvergenceCriteria(max_iteration=50))
+    t = np.asarray(result.transformation)
+  return t, float(result.fitness)
 
 
 def overlap_fitness(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
