@@ -100,6 +100,7 @@ def main(argv):
           f'{out["num_keypoints"][0]} / {out["num_keypoints"][1]} keypoints, '
           f'{out["inliers"]} inliers, {out["trials"]} RANSAC trials, '
           f'{out["seconds"]["total"]:.2f} s')
+    print('timings (s): ' + ', '.join(f'{k} {v:.2f}' for k, v in out['seconds'].items()))
     print('T_12 =\n' + np.array2string(transform, precision=4, suppress_small=True))
     print(f'overlap fitness (cloud-2 points within 0.5 m of cloud 1): {out["overlap_fitness"]:.3f}')
     if t_gt is not None:

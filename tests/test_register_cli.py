@@ -78,3 +78,24 @@ def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):
   lines = [json.loads(l) for l in (tmp_path / 'pairs.jsonl').read_text().splitlines()]
   assert len(lines) == 3 and all(l['row'] == 'iss+fpfh' for l in lines)
   assert (tmp_path / 'registration.csv').read_text().count('\n') == 3
+
+
+@pytest.mark.parametrize('names', [('oxford_270', 'oxford_456'),
+                                   ('kitti_00_001554', 'kitti_00_004534')])
+def test_register_cli_on_real_pairs(names, tmp_path):
+  """The real pairs have no ground truth: the RANSAC pose must be a success (RTE < 2 m,
+  RRE < 5°) against the ICP-refined pose, and most points of cloud 2 must land on cloud 1."""
+  from tests.conftest import shared_path  # pylint: disable=g-import-not-at-top
+  c1, c2 = (shared_path('example', f'{n}.bin') for n in names)
+  out = _run('experiments.register', f'--cloud1={c1}', f'--cloud2={c2}', '--fpfh_max_nn=200',
+             f'--json={tmp_path / "ransac.json"}')
+  assert out.returncode == 0, out.stderr[-3000:]
+  out = _run('experiments.register', f'--cloud1={c1}', f'--cloud2={c2}', '--fpfh_max_nn=200',
+             '--icp', f'--json={tmp_path / "icp.json"}')
+  assert out.returncode == 0, out.stderr[-3000:]
+  ransac_t = np.array(json.loads((tmp_path / 'ransac.json').read_text())['T_12'])
+  icp = json.loads((tmp_path / 'icp.json').read_text())
+  from ssd_jax.registration import metrics  # pylint: disable=g-import-not-at-top
+  err = metrics.registration_errors(np.array(icp['T_12']), ransac_t)
+  assert icp['icp_fitness'] > 0.8 and icp['overlap_fitness'] > 0.7
+  assert err['success'] and err['rte'] < 1.0, err
