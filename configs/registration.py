@@ -24,7 +24,8 @@ def get_config() -> ml_collections.ConfigDict:
       'ours': 'runs/cpu_small',               # self-supervised (this paper)
       '3dfeatnet': 'runs/3dfeatnet_small',    # weakly supervised baseline
   })
-  config.rows = ('iss+fpfh', 'iss+3dfeatnet', 'iss+ours', '3dfeatnet+3dfeatnet', '3dfeatnet+ours')
+  config.rows = ('iss+fpfh', 'iss+3dfeatnet', 'iss+ours', '3dfeatnet+fpfh', '3dfeatnet+3dfeatnet',
+                 '3dfeatnet+ours')
   config.max_pairs = 0            # 0 = all pairs
   config.seed = 0                 # RANSAC samples of pair n use seed * 1,000,003 + n
   config.inlier_threshold = 1.0   # metres
