@@ -19,7 +19,7 @@ import numpy as np
 from tqdm import auto as tqdm
 
 from ssd_jax.data import benchmarks, io
-from ssd_jax.registration import metrics, pipeline, ransac
+from ssd_jax.registration import matching, metrics, pipeline, ransac
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('dataset', 'data_cache/synthetic_small/test_kitti', 'Registration test set.')
@@ -53,7 +53,7 @@ def main(argv):
         pts = io.read_cloud(path)
         cache[path] = pipeline.cloud_features(pts, 'iss', 'fpfh', fpfh_max_nn=200)
     f1, f2 = cache[pair.cloud1], cache[pair.cloud2]
-    nn = pipeline.matching.nearest_neighbour_matches(f1.descriptors, f2.descriptors)
+    nn = matching.nearest_neighbour_matches(f1.descriptors, f2.descriptors)
     xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[nn].astype(np.float64)
     samples = ransac.draw_minimal_samples(np.random.default_rng(n), xyz2, 10_001)
     methods = {

@@ -12,7 +12,6 @@ KITTI's GPS/INS pose was off) are printed and written to icp_corrections.txt.
 """
 
 import os
-import pathlib
 
 from absl import app
 from absl import flags
@@ -21,7 +20,6 @@ from tqdm import auto as tqdm
 
 from ssd_jax.data import groundtruth, io, kitti, preprocess
 from ssd_jax.registration import metrics, pipeline
-from ssd_jax.synthetic import dataset
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('kitti_root', None, 'Folder holding sequences/ and poses/.')
@@ -44,14 +42,14 @@ def process_sequence(root, seq, out, spacing, pair_distance, voxel, normal_radiu
   clouds = {}
   for i in tqdm.tqdm(kept, desc=f'sequence {seq}', unit='cloud'):
     raw = io.read_cloud(os.path.join(root, 'sequences', seq, 'velodyne', f'{i:06d}.bin'), 'xyzi')
-    pts = preprocess.voxel_downsample(raw[np.all(np.isfinite(raw), 1)], voxel)
-    io.write_bin(os.path.join(folder, f'{i:06d}.bin'), pts,
-                 preprocess.estimate_normals(pts, normal_radius))
+    pts, normals = preprocess.process_scan(raw[np.all(np.isfinite(raw), 1)], voxel,
+                                           normal_radius)
+    io.write_bin(os.path.join(folder, f'{i:06d}.bin'), pts, normals)
     clouds[int(i)] = pts
-  dataset.write_poses(pathlib.Path(folder) / 'poses.txt', poses[kept])
+  kitti.write_poses(os.path.join(folder, 'poses.txt'), poses[kept])
   pairs = [groundtruth.GroundTruthPair(int(kept[a]), int(kept[b]),
-                                       dataset.relative_pose(poses, kept[a], kept[b]))
-           for a, b in dataset.close_pairs(poses[kept, :3, 3], pair_distance)]
+                                       groundtruth.relative_pose(poses, kept[a], kept[b]))
+           for a, b in groundtruth.close_pairs(poses[kept, :3, 3], pair_distance)]
   corrections = []
   if icp:
     groundtruth.write_groundtruths(os.path.join(folder, 'groundtruths_kitti.txt'), pairs)

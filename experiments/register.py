@@ -18,6 +18,7 @@ from absl import app
 from absl import flags
 import numpy as np
 
+from ssd_jax import geometry
 from ssd_jax.data import groundtruth, io, pipeline as data_pipeline
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import metrics, pipeline
@@ -48,7 +49,7 @@ def _ground_truth(path, cloud1, cloud2):
     if (pair.idx1, pair.idx2) == (i1, i2):
       return pair.transform
     if (pair.idx1, pair.idx2) == (i2, i1):
-      return np.linalg.inv(pair.transform)
+      return geometry.invert_transform(pair.transform)
   raise SystemExit(f'error: {path} does not list the pair ({i1}, {i2})')
 
 

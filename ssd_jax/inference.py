@@ -99,13 +99,14 @@ def shuffled(points: np.ndarray, seed: int = 0) -> np.ndarray:
   return points[np.random.default_rng(seed).permutation(len(points))]
 
 
-def kdtree_neighbourhoods(points: np.ndarray, centers: np.ndarray, radius: float,
-                          num_samples: int) -> tuple[np.ndarray, np.ndarray]:
+def kdtree_neighbourhoods(points: np.ndarray | spatial.cKDTree, centers: np.ndarray,
+                          radius: float, num_samples: int) -> tuple[np.ndarray, np.ndarray]:
   """Host ball query with `grouping.ball_query` semantics.
 
-  points [N, 3], centers [K, 3] -> idx [K, c] int32, has_neighbour [K] bool.
+  points [N, 3] (or a cKDTree built on them, to reuse it across calls), centers
+  [K, 3] -> idx [K, c] int32, has_neighbour [K] bool.
   """
-  tree = spatial.cKDTree(points)
+  tree = points if isinstance(points, spatial.cKDTree) else spatial.cKDTree(points)
   # cKDTree tests d <= r; ball_query tests d^2 < r^2. Shrinking r by one ulp makes
   # the boundary case agree.
   lists = tree.query_ball_point(centers, np.nextafter(radius, 0), return_sorted=True)
@@ -143,6 +144,7 @@ def _chunks(model: Model, points: np.ndarray, centers: np.ndarray, what: str, se
   padded = np.zeros((size, 3), np.float32)
   padded[:n] = points
   pts, valid = jnp.asarray(padded), jnp.asarray(np.arange(size) < n)
+  tree = spatial.cKDTree(points) if search == 'kdtree' else None
   outputs = []
   for start in range(0, len(centers), chunk):
     ctr = np.zeros((chunk, 3), np.float32)
@@ -151,8 +153,11 @@ def _chunks(model: Model, points: np.ndarray, centers: np.ndarray, what: str, se
     if search == 'dense':
       idx, has = _dense_neighbourhoods(pts, valid, jnp.asarray(ctr), radius=model.radius,
                                        num_samples=model.num_samples)
-    else:
-      idx, has = kdtree_neighbourhoods(points, ctr, model.radius, model.num_samples)
+    else:   # query the real centers only; padded slots stay empty
+      idx = np.zeros((chunk, model.num_samples), np.int32)
+      has = np.zeros(chunk, bool)
+      idx[:len(part)], has[:len(part)] = kdtree_neighbourhoods(tree, part, model.radius,
+                                                               model.num_samples)
     out = _run_on_groups(model.net, model.variables, pts, jnp.asarray(ctr), jnp.asarray(idx),
                          jnp.asarray(has), radius=model.radius, what=what)
     outputs.append(jax.tree.map(lambda a, m=len(part): np.asarray(a)[:m], out))

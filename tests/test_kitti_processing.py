@@ -37,7 +37,7 @@ def test_processing_recovers_the_true_velodyne_poses(tmp_path):
   assert len(drive.poses) - 2 <= n <= len(drive.poses) and m >= 5   # the U-turn may skip one
   out = tmp_path / 'out' / '00'
   for p in groundtruth.read_groundtruths(out / 'groundtruths_kitti.txt'):
-    np.testing.assert_allclose(p.transform, dataset.relative_pose(drive.poses, p.idx1, p.idx2),
+    np.testing.assert_allclose(p.transform, groundtruth.relative_pose(drive.poses, p.idx1, p.idx2),
                                atol=1e-6)
   # the poses are exact here, so ICP barely moves them (a few cm; along a
   # corridor-like street up to ~0.1 m, which bounds what --icp can certify)

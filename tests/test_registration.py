@@ -114,3 +114,11 @@ def test_registration_metrics_hand_computed():
                           'trials': 30}])
   assert s == {'pairs': 2, 'rte': 1.0, 'rre': 1.0, 'rre_geodesic': 1.0, 'success_rate': 0.5,
                'trials': 20.0}
+
+
+def test_ransac_refuses_too_few_samples():
+  _, xyz1, xyz2, _ = _noisy_correspondences(np.random.default_rng(0), 50, 0.5)
+  samples = ransac.draw_minimal_samples(np.random.default_rng(0), xyz2, 100)
+  for fn in (ransac.ransac, ransac.ransac_sequential):
+    with pytest.raises(ValueError, match='max_trials \\+ 1 = 10001 trials but got 100 samples'):
+      fn(xyz1, xyz2, samples)

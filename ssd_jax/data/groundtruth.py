@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Iterable
 
 import numpy as np
+from scipy import spatial
 
 from ssd_jax import geometry
 from ssd_jax.data.io import CloudFileError
@@ -31,6 +32,18 @@ class GroundTruthPair:
   idx1: int
   idx2: int
   transform: np.ndarray
+
+
+def relative_pose(poses: np.ndarray, i: int, j: int) -> np.ndarray:
+  """T_ij [4, 4] from sensor poses T_world_sensor [P, 4, 4]: maps scan j's frame into
+  scan i's."""
+  return geometry.invert_transform(poses[i]) @ poses[j]
+
+
+def close_pairs(positions: np.ndarray, max_distance: float) -> list[tuple[int, int]]:
+  """Index pairs (i < j) of positions [P, 3] less than max_distance metres apart."""
+  tree = spatial.cKDTree(positions)
+  return sorted((int(i), int(j)) for i, j in tree.query_pairs(max_distance - 1e-9))
 
 
 def write_groundtruths(path: str | os.PathLike, pairs: Iterable[GroundTruthPair]) -> None:

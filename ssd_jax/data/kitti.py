@@ -50,6 +50,12 @@ def velodyne_poses(camera_poses: np.ndarray, tr: np.ndarray) -> np.ndarray:
   return geometry.invert_transform(tr) @ camera_poses @ tr
 
 
+def write_poses(path: str | os.PathLike, poses: np.ndarray) -> None:
+  """Poses [P, 4, 4] in the `poses/XX.txt` layout: one row-major 3 x 4 per line."""
+  Path(path).write_text(''.join(' '.join(f'{v:.9e}' for v in p[:3].ravel()) + '\n'
+                                for p in poses))
+
+
 def keyframes(positions: np.ndarray, spacing: float) -> np.ndarray:
   """Indices of the frames kept when one is kept every `spacing` metres of travel."""
   kept, last = [0], positions[0]

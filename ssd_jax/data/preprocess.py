@@ -21,6 +21,14 @@ def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
   return np.asarray(down.points, np.float32)
 
 
+def process_scan(points: np.ndarray, voxel_size: float = 0.2,
+                 normal_radius: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+  """3DFeat-Net's test-set processing: voxel grid, then normals facing the sensor at
+  the origin. [N, 3] -> points [M, 3], normals [M, 3]."""
+  points = voxel_downsample(points, voxel_size)
+  return points, estimate_normals(points, normal_radius)
+
+
 def estimate_normals(points: np.ndarray, radius: float = 1.0, max_nn: int = 30,
                      viewpoint=(0.0, 0.0, 0.0)) -> np.ndarray:
   """Unit normals [N, 3] from PCA of up to `max_nn` neighbours within `radius`

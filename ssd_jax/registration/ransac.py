@@ -70,6 +70,13 @@ def draw_minimal_samples(rng: np.random.Generator, xyz2: np.ndarray, num_trials:
                    'collinear or coincident)')
 
 
+def _check_samples(samples: np.ndarray, max_trials: int) -> None:
+  if len(samples) < max_trials + 1:
+    raise ValueError(f'RANSAC may run max_trials + 1 = {max_trials + 1} trials but got '
+                     f'{len(samples)} samples; draw them with draw_minimal_samples(rng, xyz2, '
+                     f'{max_trials + 1})')
+
+
 def _adaptive_trials(score: int, n: int, confidence: float, min_trials: int) -> float:
   w = score / n
   p_no_outliers = min(max(1.0 - w ** 3, np.finfo(float).eps), 1.0 - np.finfo(float).eps)
@@ -81,6 +88,7 @@ def ransac_sequential(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
                       max_trials: int = 10_000, min_trials: int = 10) -> RansacResult:
   """Correspondences xyz1[i] <-> xyz2[i] ([C, 3] metres each) -> T_12, one trial at a
   time over samples [>= max_trials + 1, 3]."""
+  _check_samples(samples, max_trials)
   n = len(xyz1)
   best_score, best_inliers, trials, needed = -1, None, 0, float(min_trials)
   while needed > trials:
@@ -146,6 +154,7 @@ def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
 
 def _ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials, min_trials,
             batch_size, dtype) -> RansacResult:
+  _check_samples(samples, max_trials)
   n = len(xyz1)
   size = _bucket(n)
   pad = lambda a: np.concatenate([a, np.zeros((size - n, 3))]).astype(dtype)

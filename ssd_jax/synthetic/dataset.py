@@ -31,7 +31,7 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import geometry
-from ssd_jax.data import groundtruth, io, pipeline, preprocess
+from ssd_jax.data import groundtruth, io, kitti, pipeline, preprocess
 from ssd_jax.synthetic import lidar, scene as scene_lib, trajectory
 
 SPLITS = {'train': 1, 'test_kitti': 2, 'test_oxford': 3, 'clusters': 4}
@@ -115,25 +115,8 @@ def make_drive(config, split: str, index: int) -> Drive:
 
 
 def process(config, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-  """3DFeat-Net's processing: voxel grid, then normals facing the sensor."""
-  points = preprocess.voxel_downsample(points, config.voxel_size)
-  return points, preprocess.estimate_normals(points, config.normal_radius)
-
-
-def close_pairs(positions: np.ndarray, max_distance: float) -> list[tuple[int, int]]:
-  """Index pairs (i < j) of positions [P, 3] less than max_distance metres apart."""
-  tree = spatial.cKDTree(positions)
-  return sorted((int(i), int(j)) for i, j in tree.query_pairs(max_distance - 1e-9))
-
-
-def relative_pose(poses: np.ndarray, i: int, j: int) -> np.ndarray:
-  """T_ij [4, 4]: maps points of scan j's sensor frame into scan i's."""
-  return geometry.invert_transform(poses[i]) @ poses[j]
-
-
-def write_poses(path: Path, poses: np.ndarray) -> None:
-  """KITTI `poses/XX.txt` layout: one row-major 3 x 4 matrix per line."""
-  path.write_text(''.join(' '.join(f'{v:.9e}' for v in p[:3].ravel()) + '\n' for p in poses))
+  """3DFeat-Net's processing with the config's voxel size and normal radius."""
+  return preprocess.process_scan(points, config.voxel_size, config.normal_radius)
 
 
 def _write_train(config, out: Path, tick: Callable[[], None]) -> int:
@@ -143,7 +126,7 @@ def _write_train(config, out: Path, tick: Callable[[], None]) -> int:
     drive = make_drive(config, 'train', seq)
     folder = out / 'train' / f'{seq:02d}'
     folder.mkdir(parents=True)
-    write_poses(folder / 'poses.txt', drive.poses)
+    kitti.write_poses(folder / 'poses.txt', drive.poses)
     tree = spatial.cKDTree(drive.positions)
     for k in range(len(drive.poses)):
       points, normals = process(config, drive.scan(k))
@@ -165,13 +148,13 @@ def _write_test_kitti(config, out: Path, tick) -> int:
     drive = make_drive(config, 'test_kitti', seq)
     folder = out / 'test_kitti' / f'{seq:02d}'
     folder.mkdir(parents=True)
-    write_poses(folder / 'poses.txt', drive.poses)
+    kitti.write_poses(folder / 'poses.txt', drive.poses)
     for k in range(len(drive.poses)):
       points, normals = process(config, drive.scan(k))
       io.write_bin(folder / f'{k:06d}.bin', points, normals)
       tick()
-    pairs = [groundtruth.GroundTruthPair(i, j, relative_pose(drive.poses, i, j))
-             for i, j in close_pairs(drive.positions, cfg.pair_max_distance)]
+    pairs = [groundtruth.GroundTruthPair(i, j, groundtruth.relative_pose(drive.poses, i, j))
+             for i, j in groundtruth.close_pairs(drive.positions, cfg.pair_max_distance)]
     groundtruth.write_groundtruths(folder / 'groundtruths.txt', pairs)
     num_pairs += len(pairs)
   return num_pairs
@@ -196,8 +179,8 @@ def _write_test_oxford(config, out: Path, tick) -> int:
       frames.append(drive.poses[k] @ geometry.make_transform(rot.T, np.zeros(3)))
       tick()
     frames = np.stack(frames)
-    all_pairs += [groundtruth.GroundTruthPair(idx0 + i, idx0 + j, relative_pose(frames, i, j))
-                  for i, j in close_pairs(drive.positions, cfg.pair_max_distance)]
+    all_pairs += [groundtruth.GroundTruthPair(idx0 + i, idx0 + j, groundtruth.relative_pose(frames, i, j))
+                  for i, j in groundtruth.close_pairs(drive.positions, cfg.pair_max_distance)]
     idx0 += len(drive.poses)
   if all_pairs:
     groundtruth.write_groundtruths(out / 'test_oxford' / 'groundtruths.txt', all_pairs)
@@ -230,7 +213,7 @@ def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
     drives.append(drive)
     clouds.append(scans)
   rng = np.random.default_rng((int(config.seed), SPLITS['clusters'], 1 << 20))
-  near = [close_pairs(d.positions, cfg.positive_max_distance) for d in drives]
+  near = [groundtruth.close_pairs(d.positions, cfg.positive_max_distance) for d in drives]
   far = [[(i, j) for i in range(len(d.poses)) for j in range(i + 1, len(d.poses))
           if np.linalg.norm(d.positions[i] - d.positions[j]) >= cfg.negative_min_distance]
          for d in drives]
@@ -256,7 +239,7 @@ def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
         continue
       c0 = pts_i[kp_i[rng.integers(len(kp_i))]]
       if label:
-        c1 = geometry.apply_transform(relative_pose(drives[seq].poses, j, i), c0[None])[0]
+        c1 = geometry.apply_transform(groundtruth.relative_pose(drives[seq].poses, j, i), c0[None])[0]
         if tree_j.query(c1)[0] > cfg.max_surface_distance:
           continue   # not seen from scan j
       else:
