@@ -6,7 +6,7 @@ Command:
         --out=data_cache/synthetic_small
 
 3 training scenes scanned every 6 m (~210 clouds), 2 KITTI-style test scenes
-(~85 clouds, ~100 pairs), 1 Oxford-style test scene and 400 cluster pairs.
+(~85 clouds, ~100 pairs), 1 Oxford-style test scene and 2,000 cluster pairs.
 """
 
 from configs import synthetic
@@ -19,5 +19,5 @@ def get_config():
   config.test_kitti.num_scenes = 2
   config.test_oxford.num_scenes = 1
   config.clusters.num_scenes = 1
-  config.clusters.num_pairs = 400
+  config.clusters.num_pairs = 2000
   return config

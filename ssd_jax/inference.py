@@ -45,11 +45,13 @@ class Model:
     variables: {'params', 'batch_stats'}.
     radius: ball-query radius, metres.
     num_samples: points per cluster (c).
+    step: the training step, for models restored by `load`.
   """
   net: network.FeatureNet
   variables: Any
   radius: float = 2.0
   num_samples: int = 64
+  step: int | None = None     # training step of a loaded checkpoint
 
   @classmethod
   def from_config(cls, config: ml_collections.ConfigDict, variables) -> 'Model':
@@ -72,9 +74,11 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
   config = ml_collections.ConfigDict(ckpt.restore_config(step))
   abstract = checkpoint.abstract_like(
       jax.eval_shape(lambda: train.create_train_state(config, jax.random.key(0))))
+  step = ckpt.latest_step() if step is None else step
   state, _ = ckpt.restore(abstract, step)
   ckpt.close()
-  return Model.from_config(config, {'params': state.params, 'batch_stats': state.batch_stats})
+  model = Model.from_config(config, {'params': state.params, 'batch_stats': state.batch_stats})
+  return dataclasses.replace(model, step=int(step))
 
 
 def _bucket(n: int, smallest: int = 1024) -> int:
@@ -174,6 +178,43 @@ def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: st
   points = shuffled(check_cloud(points), seed)
   keypoints = check_cloud(keypoints, 'keypoints')
   return np.concatenate(_chunks(model, points, keypoints, 'describe', search, chunk))
+
+
+def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, chunk: int = 512,
+                      seed: int = 0) -> np.ndarray:
+  """One learned descriptor per small cloud, at its center, batched across clouds.
+
+  For descriptor-matching sets (REFERENCE §8) of thousands of cluster crops: equal to
+  `describe(model, clouds[k], centers[k:k+1], seed=seed)` for every k, without a
+  network call per crop. clouds: sequence of [N_k, 3] metres; centers [K, 3] metres
+  (default: each crop's origin) -> [K, D] float32.
+  """
+  centers = (np.zeros((len(clouds), 3), np.float32) if centers is None
+             else check_cloud(centers, 'centers'))
+  if len(centers) != len(clouds):
+    raise ValueError(f'{len(clouds)} clouds but {len(centers)} centers')
+  c = model.num_samples
+  groups = np.zeros((len(clouds), c, 3), np.float32)
+  has = np.zeros(len(clouds), bool)
+  for k, cloud in enumerate(clouds):
+    pts = shuffled(check_cloud(cloud, f'cloud {k}'), seed)
+    idx, h = kdtree_neighbourhoods(pts, centers[k:k + 1], model.radius, c)
+    groups[k], has[k] = pts[idx[0]], h[0]
+  # Each chunk is its own flat "cloud" of chunk * c points whose k-th cluster is rows
+  # k*c ... k*c + c - 1, so the jitted network sees one static shape.
+  flat_idx = jnp.arange(chunk * c, dtype=jnp.int32).reshape(chunk, c)
+  out = []
+  for start in range(0, len(clouds), chunk):
+    m = min(chunk, len(clouds) - start)
+    pts = np.zeros((chunk, c, 3), np.float32)
+    ctr = np.zeros((chunk, 3), np.float32)
+    hb = np.zeros(chunk, bool)
+    pts[:m], ctr[:m], hb[:m] = groups[start:start + m], centers[start:start + m], has[start:start + m]
+    d = _run_on_groups(model.net, model.variables, jnp.asarray(pts.reshape(-1, 3)),
+                       jnp.asarray(ctr), flat_idx, jnp.asarray(hb), radius=model.radius,
+                       what='describe')
+    out.append(np.asarray(d)[:m])
+  return np.concatenate(out) if out else np.zeros((0, model.net.descriptor_dim), np.float32)
 
 
 def attention(model: Model, points: np.ndarray, search: str = 'kdtree', chunk: int = 2048,

@@ -84,3 +84,70 @@ def plot_registration(points1: np.ndarray, points2: np.ndarray, kp1: np.ndarray,
   ax.set_title(title or f'{int(inliers.sum())} inlier matches of {len(inliers)}')
   fig.savefig(path, dpi=100, bbox_inches='tight')
   plt.close(fig)
+
+
+def plot_precision(thresholds: np.ndarray, curves: dict, path: str | os.PathLike,
+                   title: str = 'Precision of nearest-neighbour matches', marker: float = 1.0) -> None:
+  """Paper Fig. 4: fraction of matches within x metres of the ground truth.
+
+  thresholds [T] metres; curves {label: [T] fractions}; `marker` draws the x line the
+  paper reads the curves at.
+  """
+  plt = _pyplot()
+  fig, ax = plt.subplots(figsize=(6.4, 4.8))
+  for label, curve in curves.items():
+    ax.plot(thresholds, 100 * np.asarray(curve), lw=1.6, label=label)
+  ax.axvline(marker, color='k', ls='--', lw=0.8)
+  ax.text(marker, 2, f' x = {marker:g} m', fontsize=8)
+  ax.set_xlim(0, float(np.max(thresholds)))
+  ax.set_ylim(0, 100)
+  ax.set_xlabel('distance to ground-truth location x (m)')
+  ax.set_ylabel('precision (%)')
+  ax.set_title(title)
+  ax.grid(alpha=0.3)
+  ax.legend(loc='lower right', fontsize=8)
+  fig.savefig(path, dpi=120, bbox_inches='tight')
+  plt.close(fig)
+
+
+def plot_roc(curves: dict, path: str | os.PathLike, recall: float = 0.95,
+             title: str = 'Descriptor matching ROC') -> None:
+  """curves {label: (fpr [T], recall [T])}; a dashed line at the evaluated recall."""
+  plt = _pyplot()
+  fig, ax = plt.subplots(figsize=(5.6, 5.0))
+  for label, (fpr, tpr) in curves.items():
+    ax.plot(100 * np.asarray(fpr), 100 * np.asarray(tpr), lw=1.6, label=label)
+  ax.plot([0, 100], [0, 100], color='0.6', lw=0.8, ls=':')
+  ax.axhline(100 * recall, color='k', ls='--', lw=0.8)
+  ax.set_xlim(0, 100)
+  ax.set_ylim(0, 100)
+  ax.set_xlabel('false-positive rate (%)')
+  ax.set_ylabel('recall (%)')
+  ax.set_title(title)
+  ax.grid(alpha=0.3)
+  ax.legend(loc='lower right', fontsize=8)
+  fig.savefig(path, dpi=120, bbox_inches='tight')
+  plt.close(fig)
+
+
+def plot_keypoints(points: np.ndarray, keypoints: dict, path: str | os.PathLike,
+                   view_radius: float = 40.0, max_points: int = 60_000, seed: int = 0) -> None:
+  """Paper Fig. 3: each detector's keypoints as red dots on the same cloud, top view.
+
+  points [N, 3] metres; keypoints {label: [K, 3] metres}, one panel each.
+  """
+  plt = _pyplot()
+  rng = np.random.default_rng(seed)
+  pts = points[np.linalg.norm(points[:, :2] - points[:, :2].mean(0), axis=1) < view_radius]
+  if len(pts) > max_points:
+    pts = pts[rng.choice(len(pts), max_points, replace=False)]
+  fig, axes = plt.subplots(1, len(keypoints), figsize=(6.2 * len(keypoints), 6.2), squeeze=False)
+  for ax, (label, kp) in zip(axes[0], keypoints.items()):
+    ax.scatter(pts[:, 0], pts[:, 1], s=0.2, c='0.55', linewidths=0)
+    ax.scatter(kp[:, 0], kp[:, 1], s=5, c='red', linewidths=0)
+    ax.set_aspect('equal')
+    ax.set_xlabel('x (m)')
+    ax.set_ylabel('y (m)')
+    ax.set_title(f'{label}: {len(kp)} keypoints')
+  fig.savefig(path, dpi=110, bbox_inches='tight')
+  plt.close(fig)

@@ -18,8 +18,24 @@ def shared_path(*parts) -> Path:
   return path
 
 
+@pytest.fixture(scope='session')
+def synthetic_root(tmp_path_factory):
+  """A tiny synthetic data root (train/, test_kitti/, test_oxford/, clusters/ with 24 pairs)."""
+  from ssd_jax.synthetic import dataset  # pylint: disable=g-import-not-at-top
+  from tests.test_synthetic import tiny_config as synthetic_config  # pylint: disable=g-import-not-at-top
+  config = synthetic_config()
+  config.clusters.num_pairs = 24
+  out = tmp_path_factory.mktemp('synthetic_root') / 'tiny'
+  dataset.generate(config, out)
+  return out
+
+
 @pytest.fixture
 def tiny_config():
+  return tiny_config_dict()
+
+
+def tiny_config_dict():
   """cpu_small shrunk so one jitted step takes well under a second on 2 cores."""
   config = cpu_small.get_config()
   config.progress_bar = False

@@ -9,19 +9,13 @@ import numpy as np
 import pytest
 
 from ssd_jax.data import benchmarks, io
-from ssd_jax.synthetic import dataset
-from tests.test_synthetic import tiny_config
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-@pytest.fixture(scope='module')
-def tiny_set(tmp_path_factory):
-  out = tmp_path_factory.mktemp('reg') / 'tiny'
-  config = tiny_config()
-  config.clusters.num_scenes = 0
-  dataset.generate(config, out)
-  return out
+@pytest.fixture
+def tiny_set(synthetic_root):
+  return synthetic_root
 
 
 def _run(*args):
@@ -75,7 +69,7 @@ def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):
   md = (tmp_path / 'registration.md').read_text()
   assert '| ISS kpt + FPFH desc | 3 |' in md
   assert '| ISS kpt + Ours desc | missing |' in md and 'no such checkpoint directory' in md
-  lines = [json.loads(l) for l in (tmp_path / 'pairs.jsonl').read_text().splitlines()]
+  lines = [json.loads(l) for l in (tmp_path / 'registration_pairs.jsonl').read_text().splitlines()]
   assert len(lines) == 3 and all(l['row'] == 'iss+fpfh' for l in lines)
   assert (tmp_path / 'registration.csv').read_text().count('\n') == 3
 

@@ -10,7 +10,7 @@
       test_oxford/test_models/<idx>.bin   Oxford-style: 16,384 points, randomly rotated
       test_oxford/groundtruths.txt
       clusters/filenames.txt        descriptor-matching pairs (REFERENCE §8)
-      clusters/<i>_0.bin, <i>_1.bin 4 m crops centred on the keypoint, randomly rotated
+      clusters/<i>_0.bin, <i>_1.bin 4 m crops centred on a random point, randomly rotated
       synthetic.json                the config and seed that made it, and counts
 
 Every split uses its own scenes. Each scene, drive and scan draws from its own
@@ -61,6 +61,9 @@ def check_config(config) -> None:
   positive('normal_radius', config.normal_radius)
   positive('test_oxford.num_points', config.test_oxford.num_points)
   positive('clusters.num_pairs', config.clusters.num_pairs, allow_zero=True)
+  if config.clusters.centers not in ('random', 'iss'):
+    raise SyntheticConfigError(f"clusters.centers must be 'random' or 'iss', got "
+                               f'{config.clusters.centers!r}')
   if config.clusters.num_pairs % 2:
     raise SyntheticConfigError(f'clusters.num_pairs must be even (half match), got '
                                f'{config.clusters.num_pairs}')
@@ -197,7 +200,8 @@ def _crop_cluster(rng, points, normals, center, radius):
 
 def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
   """Matching pairs: one world point seen from two scans < 10 m apart; non-matching:
-  keypoints of two scans at least 20 m apart (REFERENCE §8)."""
+  points of two scans at least 20 m apart (REFERENCE §8). Centres are random scan
+  points (`clusters.centers='random'`, the paper's) or ISS keypoints ('iss')."""
   from ssd_jax.registration import keypoints  # pylint: disable=g-import-not-at-top
   cfg = config.clusters
   folder = out / 'clusters'
@@ -208,7 +212,8 @@ def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
     scans = []
     for k in range(len(drive.poses)):
       points, normals = process(config, drive.scan(k))
-      scans.append((points, normals, keypoints.iss(points), spatial.cKDTree(points)))
+      centers = (keypoints.iss(points) if cfg.centers == 'iss' else np.arange(len(points)))
+      scans.append((points, normals, centers, spatial.cKDTree(points)))
       tick()
     drives.append(drive)
     clouds.append(scans)
@@ -233,17 +238,17 @@ def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
       i, j = pool[rng.integers(len(pool))]
       if rng.uniform() < 0.5:
         i, j = j, i
-      pts_i, nrm_i, kp_i, _ = clouds[seq][i]
-      pts_j, nrm_j, kp_j, tree_j = clouds[seq][j]
-      if len(kp_i) == 0 or len(kp_j) == 0:
+      pts_i, nrm_i, ctr_i, _ = clouds[seq][i]
+      pts_j, nrm_j, ctr_j, tree_j = clouds[seq][j]
+      if len(ctr_i) == 0 or len(ctr_j) == 0:
         continue
-      c0 = pts_i[kp_i[rng.integers(len(kp_i))]]
+      c0 = pts_i[ctr_i[rng.integers(len(ctr_i))]]
       if label:
         c1 = geometry.apply_transform(groundtruth.relative_pose(drives[seq].poses, j, i), c0[None])[0]
         if tree_j.query(c1)[0] > cfg.max_surface_distance:
           continue   # not seen from scan j
       else:
-        c1 = pts_j[kp_j[rng.integers(len(kp_j))]]
+        c1 = pts_j[ctr_j[rng.integers(len(ctr_j))]]
       a = _crop_cluster(rng, pts_i, nrm_i, c0, cfg.radius)
       b = _crop_cluster(rng, pts_j, nrm_j, c1, cfg.radius)
       if min(len(a[0]), len(b[0])) >= cfg.min_points:

@@ -1,0 +1,23 @@
+"""Shared settings of every evaluation: which checkpoints, which keypoint x
+descriptor rows, seeds and the FPFH neighbour cap. Imported by registration.py,
+precision.py, descriptor_matching.py and reproduce.py; not run on its own.
+"""
+
+import ml_collections
+
+
+def get_config() -> ml_collections.ConfigDict:
+  config = ml_collections.ConfigDict()
+  # Names are Python identifiers so that `--config.checkpoints.feat3dnet=DIR` parses.
+  config.checkpoints = ml_collections.ConfigDict({
+      'ours': 'runs/cpu_small',               # self-supervised (this paper)
+      'feat3dnet': 'runs/feat3dnet_small',    # weakly supervised 3DFeat-Net baseline
+  })
+  # keypoints+descriptor: keypoints iss | random | a checkpoint name (its detector);
+  # descriptors fpfh | a checkpoint name. The paper's Tables I/II and Fig. 4 rows:
+  config.rows = ('iss+fpfh', 'iss+feat3dnet', 'iss+ours', 'feat3dnet+fpfh',
+                 'feat3dnet+feat3dnet', 'feat3dnet+ours')
+  config.max_pairs = 0            # 0 = all pairs
+  config.seed = 0                 # RANSAC samples of pair n use seed * 1,000,003 + n
+  config.fpfh_max_nn = 1000       # neighbour cap of FPFH's searches
+  return config

@@ -1,0 +1,41 @@
+r"""The precision test of paper Fig. 4 for every keypoint x descriptor row.
+
+    python -m experiments.precision --config=configs/precision.py \
+        --workdir=runs/precision_synthetic
+
+Writes WORKDIR/precision.csv (one column per row, x = 0.1 ... 10 m),
+precision.md (the value at x = 1 m and the keypoints counted) and precision.png.
+"""
+
+from absl import app
+from absl import flags
+from ml_collections import config_flags
+
+from ssd_jax.data import benchmarks, io
+from ssd_jax.evaluation import runs
+from ssd_jax.logging_utils import quiet_libraries
+
+FLAGS = flags.FLAGS
+flags.DEFINE_string('workdir', None, 'Output directory.')
+config_flags.DEFINE_config_file('config', 'configs/precision.py', 'Evaluation config.')
+flags.mark_flags_as_required(['workdir'])
+
+
+def main(argv):
+  if len(argv) > 1:
+    raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
+  quiet_libraries()
+  config = FLAGS.config
+  try:
+    store, missing = runs.open_store(config, config.rows)
+    pairs = benchmarks.read_registration_set(config.dataset)
+  except (ValueError, io.CloudFileError) as e:
+    raise SystemExit(f'error: {e}') from None
+  if config.max_pairs:
+    pairs = pairs[:config.max_pairs]
+  print(runs.run_precision(config, pairs, store, missing, FLAGS.workdir,
+                           f'{config.dataset} ({len(pairs)} pairs)'))
+
+
+if __name__ == '__main__':
+  app.run(main)

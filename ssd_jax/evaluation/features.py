@@ -1,0 +1,132 @@
+"""Keypoint x descriptor rows and a per-cloud cache of their features.
+
+A row is "keypoints+descriptor": keypoints `iss`, `random` or a checkpoint name
+(its detector: attention + NMS, REFERENCE §4); descriptors `fpfh` or a
+checkpoint name. Checkpoint names map to training workdirs in the configs
+(`checkpoints.ours`, `checkpoints.feat3dnet`). Registration and the precision
+test use the same keypoints and descriptors of the same clouds, so one
+`FeatureStore` computes each once.
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import time
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ssd_jax.data import io, pipeline as data_pipeline
+from ssd_jax.registration import features as features_lib, pipeline
+
+BUILTIN_KEYPOINTS = ('iss', 'random')
+BUILTIN_DESCRIPTORS = ('fpfh',)
+NAMES = {'iss': 'ISS', 'random': 'random', 'fpfh': 'FPFH', 'ours': 'Ours',
+         'feat3dnet': '3DFeat-Net'}
+
+
+def split_row(row: str) -> tuple[str, str]:
+  """'iss+fpfh' -> ('iss', 'fpfh'), or a clear error."""
+  parts = row.split('+')
+  if len(parts) != 2 or not all(parts):
+    raise ValueError(f'row {row!r} must be "keypoints+descriptor", e.g. iss+fpfh')
+  return parts[0], parts[1]
+
+
+def row_label(row: str) -> str:
+  kp, desc = split_row(row)
+  return f'{NAMES.get(kp, kp)} kpt + {NAMES.get(desc, desc)} desc'
+
+
+def model_names(rows: Sequence[str]) -> list[str]:
+  """Checkpoint names the rows need."""
+  names = set()
+  for row in rows:
+    kp, desc = split_row(row)
+    names |= {kp} - set(BUILTIN_KEYPOINTS)
+    names |= {desc} - set(BUILTIN_DESCRIPTORS)
+  return sorted(names)
+
+
+def load_models(checkpoints: Mapping[str, str], names: Sequence[str]):
+  """-> ({name: inference.Model}, {name: why it is missing})."""
+  from ssd_jax import inference  # pylint: disable=g-import-not-at-top
+  models, missing = {}, {}
+  for name in names:
+    path = checkpoints.get(name)
+    if not path:
+      missing[name] = f'no checkpoint configured for {name!r}'
+      continue
+    try:
+      models[name] = inference.load(path)
+    except FileNotFoundError as e:
+      missing[name] = str(e)
+  return models, missing
+
+
+def runnable_rows(rows: Sequence[str], missing: Mapping[str, str]) -> list[str]:
+  return [r for r in rows if not set(split_row(r)) & set(missing)]
+
+
+def missing_reason(row: str, missing: Mapping[str, str]) -> str:
+  return '; '.join(v for k, v in missing.items() if k in split_row(row))
+
+
+class FeatureStore:
+  """Clouds, keypoint indices and descriptors per (file, method), computed once.
+
+  models: {checkpoint name: inference.Model}; seed: for `random` keypoints;
+  fpfh_max_nn: neighbour cap of FPFH's 4 m searches. `seconds` sums the time spent
+  per step ('keypoints:iss', 'descriptors:fpfh', ...).
+  """
+
+  def __init__(self, models: Mapping, seed: int = 0,
+               fpfh_max_nn: int = features_lib.FPFH_MAX_NN):
+    self.models = dict(models)
+    self.seed = seed
+    self.fpfh_max_nn = fpfh_max_nn
+    self.seconds = collections.defaultdict(float)
+    self._clouds, self._keypoints, self._descriptors = {}, {}, {}
+
+  def cloud(self, path: str | os.PathLike) -> np.ndarray:
+    """xyz [N, 3] metres, NaN rows dropped."""
+    key = str(path)
+    if key not in self._clouds:
+      self._clouds[key] = data_pipeline.clean_cloud(io.read_cloud(path), key)
+    return self._clouds[key]
+
+  def keypoints(self, path: str | os.PathLike, source: str) -> np.ndarray:
+    """Keypoint indices [K] into `cloud(path)`."""
+    key = (str(path), source)
+    if key not in self._keypoints:
+      points = self.cloud(path)
+      t0 = time.perf_counter()
+      if source in BUILTIN_KEYPOINTS:
+        idx = pipeline.compute_keypoints(points, source, seed=self.seed)
+      else:
+        idx = pipeline.compute_keypoints(points, 'learned', self._model(source))
+      self.seconds[f'keypoints:{source}'] += time.perf_counter() - t0
+      self._keypoints[key] = idx
+    return self._keypoints[key]
+
+  def features(self, path: str | os.PathLike, row: str) -> pipeline.CloudFeatures:
+    """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud."""
+    kp, desc = split_row(row)
+    key = (str(path), kp, desc)
+    if key not in self._descriptors:
+      points, idx = self.cloud(path), self.keypoints(path, kp)
+      t0 = time.perf_counter()
+      if desc in BUILTIN_DESCRIPTORS:
+        d = pipeline.compute_descriptors(points, idx, desc, fpfh_max_nn=self.fpfh_max_nn)
+      else:
+        d = pipeline.compute_descriptors(points, idx, 'learned', self._model(desc))
+      self.seconds[f'descriptors:{desc}'] += time.perf_counter() - t0
+      self._descriptors[key] = d
+    return pipeline.CloudFeatures(self.cloud(path)[self.keypoints(path, kp)],
+                                  self._descriptors[key], {})
+
+  def _model(self, name: str):
+    if name not in self.models:
+      raise KeyError(f'no model loaded for {name!r}; loaded: {sorted(self.models)}')
+    return self.models[name]

@@ -1,0 +1,70 @@
+"""Tables I and II: keypoints -> descriptors -> NN matches -> RANSAC on every test
+pair, summarised as the paper does (REFERENCE §6)."""
+
+from __future__ import annotations
+
+import json
+from typing import Mapping, Sequence, TextIO
+
+from tqdm import auto as tqdm
+
+from ssd_jax.evaluation import features, paper, tables
+from ssd_jax.registration import metrics, pipeline
+
+
+def register_pairs(pairs: Sequence, rows: Sequence[str], store: features.FeatureStore, *,
+                   seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
+                   max_trials: int = 10_000, log: TextIO | None = None,
+                   progress: bool = True, desc: str = 'registration') -> dict[str, list[dict]]:
+  """Register every pair with every row -> {row: [per-pair result]}.
+
+  pairs: `benchmarks.RegistrationPair`s. Pair n's RANSAC samples are seeded with
+  seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
+  result holds RTE, RRE (Euler sum, geodesic), success, trials and inliers (a pair
+  with fewer than 3 keypoints in a cloud fails, with its `error`); with
+  `log`, one JSON line per pair and row is written to it.
+  """
+  results = {row: [] for row in rows}
+  for n, pair in enumerate(tqdm.tqdm(pairs, desc=desc, unit='pair', disable=not progress)):
+    for row in rows:
+      f1, f2 = store.features(pair.cloud1, row), store.features(pair.cloud2, row)
+      res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
+      try:
+        reg = pipeline.estimate(f1, f2, seed=seed * 1_000_003 + n,
+                                inlier_threshold=inlier_threshold, confidence=confidence,
+                                max_trials=max_trials)
+      except ValueError as e:   # too few keypoints: a failed pair, not a failed benchmark
+        res.update(trials=0, inliers=0, rte=float('inf'), rre=float('inf'),
+                   rre_geodesic=float('inf'), success=False, error=str(e))
+      else:
+        res.update(trials=reg.trials, inliers=int(reg.inliers.sum()),
+                   **metrics.registration_errors(pair.transform, reg.transform))
+      results[row].append(res)
+      if log is not None:
+        log.write(json.dumps(res) + '\n')
+  return results
+
+
+HEADER = ('keypoints + descriptor', 'pairs', 'RTE (m)', 'RRE (°)', 'RRE geodesic (°)',
+          'success (%)', 'avg #iter')
+
+
+def registration_table(results: Mapping[str, list[dict]], rows: Sequence[str],
+                       missing: Mapping[str, str], paper_set: str = 'none'):
+  """-> (header, table rows) with the paper's row beside each (`paper_set`:
+  oxford | kitti | none); rows that could not run say why."""
+  ref_rows = paper.REGISTRATION.get(paper_set, {})
+  header = list(HEADER) + [f'paper ({paper_set}): RTE / RRE / success / #iter']
+  table = []
+  for row in rows:
+    ref = ref_rows.get(row)
+    ref = ' / '.join(str(v) for v in ref) if ref else '-'
+    if row in results:
+      s = metrics.summarize(results[row])
+      table.append([features.row_label(row), s['pairs'], tables.fmt(s['rte'], 3),
+                    tables.fmt(s['rre'], 3), tables.fmt(s['rre_geodesic'], 3),
+                    tables.fmt(100 * s['success_rate']), f'{s["trials"]:.0f}', ref])
+    else:
+      table.append([features.row_label(row), 'missing', '-', '-', '-', '-', '-',
+                    f'{ref} ({features.missing_reason(row, missing)})'])
+  return header, table

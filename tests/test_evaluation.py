@@ -1,0 +1,211 @@
+"""The paper's evaluations: FPR@95, precision curve, overlap mask, cluster reader and
+`experiments.reproduce` end to end on a tiny synthetic data root."""
+
+import csv
+import os
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from ssd_jax import geometry, inference, train
+from ssd_jax.data import benchmarks, clusters, io
+from ssd_jax.evaluation import descriptor_matching, features, precision, registration
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _transform(yaw_deg, t):
+  return np.asarray(geometry.make_transform(
+      np.asarray(geometry.rotation_z(np.deg2rad(yaw_deg)), np.float64), np.asarray(t, np.float64)))
+
+
+# ---- descriptor matching (REFERENCE §8) -------------------------------------------------
+
+def test_fpr_at_95_recall_by_hand():
+  pos = np.arange(1, 21) * 0.1                       # 0.1 ... 2.0
+  neg = np.array([0.5, 1.0, 1.85, 1.95, 3.0])
+  d = np.r_[pos, neg]
+  labels = np.r_[np.ones(20, int), np.zeros(5, int)]
+  perm = np.random.default_rng(0).permutation(len(d))  # order must not matter
+  # 95 % of 20 positives = 19 -> threshold = 19th smallest = 1.9; negatives <= 1.9: 3 of 5.
+  fpr, thr = descriptor_matching.fpr_at_recall(d[perm], labels[perm])
+  assert thr == pytest.approx(1.9) and fpr == pytest.approx(0.6)
+  # 50 %: 10th smallest = 1.0; negatives <= 1.0: 0.5 and 1.0.
+  assert descriptor_matching.fpr_at_recall(d, labels, 0.5) == pytest.approx((0.4, 1.0))
+  assert np.isnan(descriptor_matching.fpr_at_recall(pos, np.ones(20, int))[0])
+
+
+def test_roc_curve_and_iss_filter_counts():
+  d = np.array([0.1, 0.2, 0.3, 0.4])
+  labels = np.array([1, 0, 1, 0])
+  fpr, tpr = descriptor_matching.roc_curve(d, labels)
+  np.testing.assert_allclose(fpr, [0, 0, 0.5, 0.5, 1])
+  np.testing.assert_allclose(tpr, [0, 0.5, 0.5, 1, 1])
+  iss = np.array([[0.05, 0.15], [0.3, 0.1], [np.inf, 0.0], [0.2, 0.35]])
+  res = descriptor_matching.filtered_results({'x': d}, labels, iss, r_th=(0.1, 0.2, 0.4))
+  assert [r for r, _, _ in res] == [None, 0.1, 0.2, 0.4]
+  # both clusters within r_th: 0.2 keeps pair 0; 0.4 keeps pairs 0, 1 and 3.
+  assert [c for _, c, _ in res] == [(2, 2), (0, 0), (1, 0), (1, 2)]
+  assert res[0][2]['x'] == pytest.approx(0.5) and np.isnan(res[2][2]['x'])
+
+
+def test_cluster_reader_formats_and_errors(tmp_path):
+  for name in ('3_0.bin', '3_1.bin', '7_0.bin', '7_1.bin', 'a.bin', 'b.bin'):
+    io.write_bin(tmp_path / name, np.zeros((4, 3), np.float32), np.zeros((4, 3), np.float32))
+  (tmp_path / 'filenames.txt').write_text('pair\tcluster_0\tcluster_1\tlabel\n'
+                                          '3\t3_0.bin\t3_1.bin\t1\n7 0\n9, a.bin, b.bin, 1\n')
+  pairs = clusters.read_cluster_pairs(tmp_path)
+  assert [(p.index, p.cluster0.name, p.cluster1.name, p.label) for p in pairs] == [
+      (3, '3_0.bin', '3_1.bin', 1), (7, '7_0.bin', '7_1.bin', 0), (9, 'a.bin', 'b.bin', 1)]
+  (tmp_path / 'filenames.txt').write_text('header\n4 1\n')
+  with pytest.raises(io.CloudFileError, match=r'filenames.txt:2: cluster file .*4_0.bin is missing'):
+    clusters.read_cluster_pairs(tmp_path)
+  (tmp_path / 'filenames.txt').write_text('header\n3 maybe\n')
+  with pytest.raises(io.CloudFileError, match=r'filenames.txt:2: expected'):
+    clusters.read_cluster_pairs(tmp_path)
+  with pytest.raises(io.CloudFileError, match='no filenames.txt'):
+    clusters.read_cluster_pairs(tmp_path / 'nowhere')
+
+
+def test_fpfh_at_center_is_finite_and_depends_on_the_centre():
+  rng = np.random.default_rng(0)
+  plane = np.c_[rng.uniform(-3, 3, (800, 2)), 0.02 * rng.normal(size=800)].astype(np.float32)
+  box = np.r_[plane, np.c_[rng.uniform(-3, 3, 300), np.full(300, 1.0), rng.uniform(0, 2, 300)]]
+  d = descriptor_matching.fpfh_at_center(box.astype(np.float32))
+  assert d.shape == (33,) and np.isfinite(d).all() and d.sum() > 0
+  moved = descriptor_matching.fpfh_at_center((box - [0, 0.5, 0]).astype(np.float32))
+  assert np.abs(d - moved).sum() > 1.0   # a different centre, a different descriptor
+
+
+# ---- precision (REFERENCE §7) ----------------------------------------------------------
+
+def test_overlap_mask_counts_keypoints_near_the_moved_cloud():
+  cloud2 = np.array([[0.0, 0, 0], [10, 0, 0]])
+  t12 = _transform(90, [1, 2, 3])                  # cloud 2's origin lands at (1, 2, 3)
+  kp1 = np.array([[1, 2, 3.5], [1, 2.74, 3], [1.76, 2, 3], [1, 12, 3], [1, 12.8, 3], [11, 2, 3]])
+  mask = precision.overlap_mask(kp1, cloud2, t12)
+  # (10, 0, 0) lands at (1, 12, 3); (11, 2, 3) is where it would be without the rotation.
+  np.testing.assert_array_equal(mask, [True, True, False, True, False, False])
+
+
+def test_precision_of_perfect_and_random_descriptors():
+  rng = np.random.default_rng(0)
+  kp = rng.uniform(-25, 25, (400, 3)) * [1, 1, 0.1]
+  t12 = _transform(30, [4, -2, 0.5])
+  kp2 = geometry.apply_transform(geometry.invert_transform(t12), kp)   # cloud 2's own frame
+  unique = rng.normal(size=(400, 32))            # the same descriptor for the same point
+  perfect = precision.precision_curve(precision.match_errors(kp, unique, kp2, unique, t12))
+  assert precision.value_at(perfect, 0.1) == 1.0
+  shuffled = unique[rng.permutation(400)]
+  rand = precision.precision_curve(precision.match_errors(kp, unique, kp2, shuffled, t12))
+  assert precision.value_at(rand, 1.0) < 0.05 and precision.value_at(rand, 10.0) < 0.3
+  assert np.all(np.diff(rand) >= 0) and np.isnan(precision.precision_curve([])).all()
+
+
+# ---- learned descriptors of many clusters at once -----------------------------------------
+
+def test_describe_clusters_equals_describe_per_cluster():
+  from configs import cpu_small  # pylint: disable=g-import-not-at-top
+  config = cpu_small.get_config()
+  config.model.num_samples = 16
+  state = train.create_train_state(config, jax.random.key(0))
+  model = inference.Model.from_config(config, {'params': state.params,
+                                               'batch_stats': state.batch_stats})
+  rng = np.random.default_rng(1)
+  clouds = [rng.normal(size=(n, 3)).astype(np.float32) for n in (5, 40, 300)]
+  clouds.append(rng.uniform(3, 4, (30, 3)).astype(np.float32))   # nothing within 2 m
+  batched = inference.describe_clusters(model, clouds, chunk=2)
+  one = np.concatenate([inference.describe(model, c, np.zeros((1, 3), np.float32))
+                        for c in clouds])
+  np.testing.assert_allclose(batched, one, atol=1e-5)
+  with pytest.raises(ValueError, match='cloud 1: .* NaN'):
+    inference.describe_clusters(model, [clouds[0], np.full((3, 3), np.nan, np.float32)])
+
+
+# ---- reproduce end to end ------------------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def tiny_checkpoint(synthetic_root, tmp_path_factory):
+  from tests.conftest import tiny_config_dict  # pylint: disable=g-import-not-at-top
+  config = tiny_config_dict()
+  config.data.path = str(synthetic_root / 'train')
+  workdir = tmp_path_factory.mktemp('ckpt') / 'ours'
+  train.train_and_evaluate(config, str(workdir))
+  return workdir
+
+
+def _csv(path):
+  with open(path) as f:
+    return list(csv.reader(f))
+
+
+def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path):
+  out = tmp_path / 'out'
+  run = subprocess.run(
+      [sys.executable, '-m', 'experiments.reproduce', f'--data_root={synthetic_root}',
+       f'--workdir={out}', '--config=configs/reproduce_small.py', '--config.max_pairs=2',
+       '--config.fpfh_max_nn=50', f'--config.checkpoints.ours={tiny_checkpoint}',
+       f'--config.checkpoints.feat3dnet={tmp_path / "none"}'],
+      cwd=ROOT, capture_output=True, text=True, timeout=900)
+  assert run.returncode == 0, run.stderr[-3000:]
+  report = (out / 'report.md').read_text()
+  for heading in ('## Table I', '## Table II', '## Fig. 4: precision on oxford',
+                  '## Table III', '## Fig. 3', '## Skipped'):
+    assert heading in report, heading
+  assert 'Ours: `' in report and '(step 4)' in report
+  assert f'3DFeat-Net: `{tmp_path / "none"}` **missing**' in report
+  assert '3DFeat-Net keypoints' in report and 'no such checkpoint directory' in report
+  for png in ('fig4_precision_oxford.png', 'descriptor_matching_roc.png', 'fig3_keypoints.png',
+              'registration_oxford_iss_ours.png'):
+    assert (out / png).stat().st_size > 10_000, png
+  assert '[1/6] Table I' in run.stderr and '[6/6] Figures' in run.stderr
+
+  # The table's numbers are recomputed: redo ISS + FPFH on the same two pairs here.
+  pairs = benchmarks.read_registration_set(synthetic_root / 'test_oxford')[:2]
+  store = features.FeatureStore({}, seed=0, fpfh_max_nn=50)
+  res = registration.register_pairs(pairs, ['iss+fpfh'], store, progress=False)['iss+fpfh']
+  table = {r[0]: r for r in _csv(out / 'table_oxford.csv')}
+  row = table['ISS kpt + FPFH desc']
+  assert row[1] == '2' and float(row[5]) == pytest.approx(100 * np.mean([r['success'] for r in res]))
+  assert float(row[6]) == pytest.approx(np.mean([r['trials'] for r in res]), abs=0.5)
+  assert table['ISS kpt + Ours desc'][1] == '2'
+  assert table['3DFeat-Net kpt + Ours desc'][1] == 'missing'
+  curve = precision.evaluate_precision(pairs, ['iss+fpfh'], store, progress=False)['iss+fpfh']
+  prec = _csv(out / 'fig4_precision_oxford.csv')
+  assert prec[0][:2] == ['x (m)', 'iss+fpfh'] and len(prec) == 101
+  np.testing.assert_allclose([float(r[1]) for r in prec[1:]], curve['curve'], atol=1e-5)
+
+  # Table III from the per-pair distances it saved, and the cluster labels on disk.
+  saved = np.load(out / 'distances.npz')
+  labels = [p.label for p in clusters.read_cluster_pairs(synthetic_root / 'clusters')]
+  np.testing.assert_array_equal(saved['labels'], labels)
+  dm = {r[0]: r for r in _csv(out / 'descriptor_matching.csv')}
+  for name, key in (('FPFH', 'distance_fpfh'), ('Ours', 'distance_ours')):
+    fpr = descriptor_matching.fpr_at_recall(saved[key], labels)[0]
+    assert float(dm[name][1]) == pytest.approx(100 * fpr, abs=0.01)
+  assert dm['pairs (pos, neg)'][1] == '24 (12, 12)'
+  assert dm['3DFeat-Net'][1] == 'missing'
+
+
+def test_reproduce_says_what_it_cannot_do(tmp_path):
+  run = subprocess.run([sys.executable, '-m', 'experiments.reproduce', f'--data_root={tmp_path}',
+                        f'--workdir={tmp_path / "out"}'], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300)
+  assert run.returncode != 0 and 'Traceback' not in run.stderr
+  assert 'nothing to evaluate under' in run.stderr and 'test_oxford' in run.stderr
+
+
+def test_plot_keypoints_cli(synthetic_root, tmp_path):
+  cloud = synthetic_root / 'test_kitti' / '00' / '000000.bin'
+  run = subprocess.run([sys.executable, '-m', 'experiments.plot_keypoints', f'--cloud={cloud}',
+                        f'--out={tmp_path / "k.png"}', '--sources=iss,random'], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+  assert run.returncode == 0, run.stderr[-3000:]
+  assert 'random: 1024 keypoints' in run.stdout and (tmp_path / 'k.png').stat().st_size > 10_000
+  run = subprocess.run([sys.executable, '-m', 'experiments.plot_keypoints', f'--cloud={cloud}',
+                        f'--out={tmp_path / "k.png"}', '--sources=iss,learned'], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+  assert run.returncode != 0 and 'learned keypoints need --checkpoint' in run.stderr
