@@ -128,7 +128,9 @@ def main(argv):
 
 def reproduce(config, root: Path, out_dir: Path) -> None:
   """Every evaluation the data under `root` allows; writes out_dir/report.md."""
-  store, missing = runs.open_store(config, config.rows)
+  figure_rows = [f'{src}+fpfh' for src in config.figures.keypoint_sources]
+  store, missing = runs.open_store(
+      config, list(config.rows) + list(config.figures.registration_rows) + figure_rows)
   found, skipped = find_sets(root, config.sets)
   if not found:
     raise SystemExit(f'error: nothing to evaluate under {root}:\n  ' + '\n  '.join(skipped))
