@@ -58,6 +58,9 @@ def get_config() -> ml_collections.ConfigDict:
   oxford.pair_max_distance = 10.0
   oxford.crop_radius = 30.0
   oxford.num_points = 16384
+  # The largest grid <= this (5 % steps) giving >= num_points distinct points in the crop,
+  # then a random subset: real models have a near-regular 0.2 m spacing and no repeats.
+  oxford.voxel_size = 0.2
 
   # Descriptor-matching cluster pairs (REFERENCE §8).
   config.clusters = clusters = ml_collections.ConfigDict()

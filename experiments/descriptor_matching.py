@@ -11,7 +11,6 @@ from absl import app
 from absl import flags
 from ml_collections import config_flags
 
-from ssd_jax.data import io
 from ssd_jax.evaluation import runs
 from ssd_jax.logging_utils import quiet_libraries
 
@@ -27,7 +26,7 @@ def main(argv):
   quiet_libraries()
   try:
     text = runs.run_descriptor_matching(FLAGS.config, FLAGS.config.clusters, FLAGS.workdir)
-  except io.CloudFileError as e:
+  except ValueError as e:   # missing, truncated or empty cluster files: one line
     raise SystemExit(f'error: {e}') from None
   print(text)
 

@@ -209,3 +209,18 @@ def test_plot_keypoints_cli(synthetic_root, tmp_path):
                         f'--out={tmp_path / "k.png"}', '--sources=iss,learned'], cwd=ROOT,
                        capture_output=True, text=True, timeout=300)
   assert run.returncode != 0 and 'learned keypoints need --checkpoint' in run.stderr
+
+
+def test_descriptor_matching_cli_names_a_truncated_cluster(tmp_path):
+  good = np.zeros((10, 6), np.float32)
+  good[:, :3] = np.random.default_rng(0).normal(size=(10, 3))
+  good[:, 5] = 1.0
+  good.tofile(tmp_path / '0_0.bin')
+  (tmp_path / '0_1.bin').write_bytes(good.tobytes()[:-5])
+  (tmp_path / 'filenames.txt').write_text('pair label\n0 1\n')
+  run = subprocess.run([sys.executable, '-m', 'experiments.descriptor_matching',
+                        f'--workdir={tmp_path / "out"}', f'--config.clusters={tmp_path}',
+                        "--config.descriptors=('fpfh',)"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300)
+  assert run.returncode != 0 and 'Traceback' not in run.stderr
+  assert '0_1.bin' in run.stderr and 'truncated' in run.stderr

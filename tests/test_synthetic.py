@@ -109,6 +109,7 @@ def test_oxford_style_models(tiny_set):
   for p in pairs:
     c1, c2 = (io.read_cloud(root / 'test_models' / f'{i}.bin') for i in (p.idx1, p.idx2))
     assert c1.shape == c2.shape == (4096, 3)
+    assert len(np.unique(c1, axis=0)) == len(c1)   # no repeated points, as the real models
     assert np.linalg.norm(c1[:, :2], axis=1).max() < 30.0
     assert _overlap(c1, c2, p.transform) >= 0.4
   # models are randomly rotated: the relative yaw is not just the driving direction

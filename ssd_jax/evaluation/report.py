@@ -80,15 +80,16 @@ def descriptor_matching_outputs(distances: Mapping[str, np.ndarray], labels: np.
            ['paper pairs (pos, neg)', '30000 (15000, 15000)'] +
            ['{} ({}, {})'.format(sum(paper.ISS_FILTERED[r][0]), *paper.ISS_FILTERED[r][0])
             if r in paper.ISS_FILTERED else '-' for r in r_th]]
-  for n in distances:
-    table.append([features.NAMES.get(n, n)] + [tables.fmt(100 * f[n]) for _, _, f in res])
+  for n in list(distances) + [m for m in missing if m not in distances]:
+    label = features.NAMES.get(n, n)
+    if n in distances:
+      table.append([label] + [tables.fmt(100 * f[n]) for _, _, f in res])
+    else:
+      table.append([label] + ['missing'] * len(cols))
     ref = [paper.DESCRIPTOR_MATCHING.get(n)] + [paper.ISS_FILTERED.get(r, (0, {}))[1].get(n)
                                                 for r in r_th]
     if any(v is not None for v in ref):
-      table.append([f'{features.NAMES.get(n, n)} (paper)'] +
-                   [tables.fmt(v) if v is not None else '-' for v in ref])
-  for n, why in missing.items():
-    table.append([features.NAMES.get(n, n)] + ['missing'] * len(cols))
+      table.append([f'{label} (paper)'] + [tables.fmt(v) if v is not None else '-' for v in ref])
   tables.write_csv(os.path.join(workdir, f'{name}.csv'), header, table)
   if distances:
     viz.plot_roc({features.NAMES.get(n, n): descriptor_matching.roc_curve(d, labels)

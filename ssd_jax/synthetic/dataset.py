@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import os
 from pathlib import Path
 import shutil
@@ -60,6 +61,7 @@ def check_config(config) -> None:
   positive('voxel_size', config.voxel_size, allow_zero=True)
   positive('normal_radius', config.normal_radius)
   positive('test_oxford.num_points', config.test_oxford.num_points)
+  positive('test_oxford.voxel_size', config.test_oxford.voxel_size, allow_zero=True)
   positive('clusters.num_pairs', config.clusters.num_pairs, allow_zero=True)
   if config.clusters.centers not in ('random', 'iss'):
     raise SyntheticConfigError(f"clusters.centers must be 'random' or 'iss', got "
@@ -117,9 +119,12 @@ def make_drive(config, split: str, index: int) -> Drive:
   return Drive(seed, poses, lidar.Raycaster(scene), lidar.LidarModel.from_config(config.lidar))
 
 
-def process(config, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-  """3DFeat-Net's processing with the config's voxel size and normal radius."""
-  return preprocess.process_scan(points, config.voxel_size, config.normal_radius)
+def process(config, points: np.ndarray,
+            voxel_size: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+  """3DFeat-Net's processing with the config's voxel size (or `voxel_size`) and normal
+  radius."""
+  voxel = config.voxel_size if voxel_size is None else voxel_size
+  return preprocess.process_scan(points, voxel, config.normal_radius)
 
 
 def _write_train(config, out: Path, tick: Callable[[], None]) -> int:
@@ -163,6 +168,20 @@ def _write_test_kitti(config, out: Path, tick) -> int:
   return num_pairs
 
 
+def _model_voxel_size(raw: np.ndarray, cfg) -> float:
+  """The largest grid <= test_oxford.voxel_size, in 5 % steps, whose crop holds at least
+  num_points distinct voxels. One spinning scan holds fewer 0.2 m voxels within 30 m
+  than the real models (accumulated push-broom maps, a near-regular 0.2 m spacing,
+  no repeated point) have points; a slightly finer grid keeps the spacing regular,
+  where thinning a much finer grid at random would not."""
+  voxel = float(cfg.voxel_size)
+  for _ in range(20):
+    if len(preprocess.voxel_downsample(raw, voxel)) >= cfg.num_points:
+      break
+    voxel *= 0.95
+  return voxel
+
+
 def _write_test_oxford(config, out: Path, tick) -> int:
   """Oxford test models: cropped, a fixed point count, each in a random z-rotated frame."""
   cfg, idx0, all_pairs = config.test_oxford, 0, []
@@ -173,9 +192,13 @@ def _write_test_oxford(config, out: Path, tick) -> int:
     rng = np.random.default_rng((*drive.seed, _MODEL_ROTATION_STREAM))
     frames = []   # T_world_model of each written model
     for k in range(len(drive.poses)):
-      points, normals = process(config, drive.scan(k))
-      inside = np.linalg.norm(points[:, :2], axis=1) < cfg.crop_radius
-      points, normals = points[inside], normals[inside]
+      raw = drive.scan(k)
+      raw = raw[np.linalg.norm(raw[:, :2], axis=1) < cfg.crop_radius]
+      points, normals = process(config, raw, _model_voxel_size(raw, cfg))
+      if len(points) < cfg.num_points:   # would repeat points, which real models never do
+        logging.warning('test_oxford model %d: only %d points within %.0f m, fewer than %d; '
+                        'some are repeated', idx0 + k, len(points), cfg.crop_radius,
+                        cfg.num_points)
       keep = np.sort(pipeline.subsample_indices(rng, len(points), cfg.num_points))
       rot = geometry.rotation_z(rng.uniform(-np.pi, np.pi))
       io.write_bin(folder / f'{idx0 + k}.bin', points[keep] @ rot.T, normals[keep] @ rot.T)
