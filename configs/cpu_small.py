@@ -14,7 +14,7 @@ Batch 2 x 2,048 points, 256 clusters of 32 points, 600 steps (~0.25 s/step
 on 2 cores, ~2.7 minutes). Expected on the small synthetic set (seed 0,
 measured 2026-11-23): the training CF rotation error falls from ~11.5 degrees
 (step 20) to ~5 degrees (step 600); on the held-out test models it falls from
-~4.8 degrees (step 100) to ~2.3 degrees.
+~7.3 degrees (step 100) to ~2.4 degrees.
 """
 
 from configs import paper
