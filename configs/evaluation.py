@@ -12,11 +12,16 @@ def get_config() -> ml_collections.ConfigDict:
   config.checkpoints = ml_collections.ConfigDict({
       'ours': 'runs/cpu_small',               # self-supervised (this paper)
       'feat3dnet': 'runs/feat3dnet_small',    # weakly supervised 3DFeat-Net baseline
+      'ours_detector': 'runs/cpu_small_detector',   # self-supervised detector (extension)
   })
   # keypoints+descriptor: keypoints iss | random | a checkpoint name (its detector);
   # descriptors fpfh | a checkpoint name. The paper's Tables I/II and Fig. 4 rows:
   config.rows = ('iss+fpfh', 'iss+feat3dnet', 'iss+ours', 'feat3dnet+fpfh',
-                 'feat3dnet+feat3dnet', 'feat3dnet+ours')
+                 'feat3dnet+feat3dnet', 'feat3dnet+ours', 'ours_detector+fpfh',
+                 'ours_detector+ours_detector')
+  # Detectors whose repeatability is measured (0.5 m after the ground-truth alignment).
+  config.keypoint_sources = ('iss', 'feat3dnet', 'ours_detector', 'random')
+  config.repeatability_radius = 0.5
   config.max_pairs = 0            # 0 = all pairs
   config.seed = 0                 # RANSAC samples of pair n use seed * 1,000,003 + n
   config.fpfh_max_nn = 1000       # neighbour cap of FPFH's searches

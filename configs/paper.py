@@ -19,6 +19,7 @@ def get_config() -> ml_collections.ConfigDict:
   config = ml_collections.ConfigDict()
   config.seed = 0
   config.progress_bar = True
+  config.objective = 'self_supervised'   # self_supervised (this paper) | triplet (3DFeat-Net)
 
   config.data = data = ml_collections.ConfigDict()
   data.path = ''             # directory of clouds, Oxford train.txt, or one cloud file
@@ -43,6 +44,11 @@ def get_config() -> ml_collections.ConfigDict:
   model.jitter_sigma = 0.01      # metres
   model.jitter_clip = 0.05       # metres
   model.bn_momentum = 0.99
+  model.use_orientation = True   # False: 3DFeat-Net's descriptor pre-training (no detector)
+  model.attention_in_cf = False  # True: the self-supervised detector, w_ij * a_i * b_j in CF
+  # Triplet objective only (REFERENCE §3):
+  model.margin = 0.2
+  model.augmentations = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
 
   config.train = train = ml_collections.ConfigDict()
   train.batch_size = 6
@@ -52,4 +58,7 @@ def get_config() -> ml_collections.ConfigDict:
   train.eval_every = 500
   train.checkpoint_every = 2500
   train.keep_checkpoints = 3
+  # A finished run whose descriptor weights (and BatchNorm statistics) start this one;
+  # the detector is freshly initialised (3DFeat-Net's second stage).
+  train.init_from = ''
   return config

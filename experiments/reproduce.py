@@ -128,7 +128,8 @@ def main(argv):
 
 def reproduce(config, root: Path, out_dir: Path) -> None:
   """Every evaluation the data under `root` allows; writes out_dir/report.md."""
-  figure_rows = [f'{src}+fpfh' for src in config.figures.keypoint_sources]
+  figure_rows = [f'{src}+fpfh' for src in (*config.figures.keypoint_sources,
+                                            *config.keypoint_sources)]
   store, missing = runs.open_store(
       config, list(config.rows) + list(config.figures.registration_rows) + figure_rows)
   found, skipped = find_sets(root, config.sets)
@@ -137,7 +138,7 @@ def reproduce(config, root: Path, out_dir: Path) -> None:
   out_dir.mkdir(parents=True, exist_ok=True)
   reg_sets = [n for n in ('oxford', 'kitti') if n in found]
   prec_sets = [n for n in config.precision_sets if n in found]
-  stages = Stages(len(reg_sets) + len(prec_sets) + ('clusters' in found) + bool(reg_sets))
+  stages = Stages(2 * len(reg_sets) + len(prec_sets) + ('clusters' in found) + bool(reg_sets))
   sections = []
   for name in reg_sets:
     path, pairs = found[name]
@@ -152,6 +153,12 @@ def reproduce(config, root: Path, out_dir: Path) -> None:
     title = f'Fig. 4: precision on {name}-style pairs'
     text = stages.run(title, runs.run_precision, config, pairs, store, missing, str(out_dir),
                       f'{path} ({len(pairs)} pairs)', f'fig4_precision_{name}')
+    sections.append((title, text))
+  for name in reg_sets:
+    path, pairs = found[name]
+    title = f'Keypoint repeatability on {name}-style pairs'
+    text = stages.run(title, runs.run_repeatability, config, pairs, store, missing,
+                      str(out_dir), f'{path} ({len(pairs)} pairs)', f'repeatability_{name}')
     sections.append((title, text))
   if 'clusters' in found:
     dm = ml_collections.ConfigDict(config.descriptor_matching.to_dict())

@@ -56,8 +56,13 @@ def _nearest_rotation_jvp(primals, tangents):
 
 def descriptor_weights(feat_p: jax.Array, feat_q: jax.Array, alpha: float,
                        mask_p: jax.Array | None = None,
-                       mask_q: jax.Array | None = None) -> jax.Array:
-  """w_ij = exp(-||f_i - g_j||^2 / alpha), normalised to sum 1 over valid pairs.
+                       mask_q: jax.Array | None = None,
+                       attention_p: jax.Array | None = None,
+                       attention_q: jax.Array | None = None) -> jax.Array:
+  """w_ij = exp(-||f_i - g_j||^2 / alpha) [* a_i * b_j], normalised to sum 1 over valid pairs.
+
+  attention_p [kP], attention_q [kQ] >= 0: optional per-cluster factors (the
+  self-supervised detector: attention is then trained through the CF module).
 
   feat_p [kP, D], feat_q [kQ, D], masks [kP] / [kQ] bool -> [kP, kQ]. The
   normalisation (a common factor) leaves R and t unchanged and is done in log
@@ -66,6 +71,11 @@ def descriptor_weights(feat_p: jax.Array, feat_q: jax.Array, alpha: float,
   d2 = (jnp.sum(feat_p * feat_p, -1)[:, None] + jnp.sum(feat_q * feat_q, -1)[None, :]
         - 2.0 * feat_p @ feat_q.T)
   logits = -jnp.maximum(d2, 0.0) / alpha
+  tiny = jnp.finfo(logits.dtype).tiny
+  if attention_p is not None:
+    logits = logits + jnp.log(jnp.maximum(attention_p, tiny))[:, None]
+  if attention_q is not None:
+    logits = logits + jnp.log(jnp.maximum(attention_q, tiny))[None, :]
   pair_mask = jnp.ones(logits.shape, bool)
   if mask_p is not None:
     pair_mask &= mask_p[:, None]
@@ -93,7 +103,8 @@ def weighted_kabsch(xyz_p: jax.Array, xyz_q: jax.Array, w: jax.Array) -> tuple[j
 
 def cf_solve(xyz_p: jax.Array, xyz_q: jax.Array, feat_p: jax.Array, feat_q: jax.Array,
              alpha: float = 1.0, mask_p: jax.Array | None = None,
-             mask_q: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+             mask_q: jax.Array | None = None, attention_p: jax.Array | None = None,
+             attention_q: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
   """The CF module (paper Eq. 2-5): R, t from all k_P x k_Q descriptor pairs.
 
   Args:
@@ -103,9 +114,10 @@ def cf_solve(xyz_p: jax.Array, xyz_q: jax.Array, feat_p: jax.Array, feat_q: jax.
     feat_q: [kQ, D] descriptors of Q.
     alpha: temperature of the weights (paper: 1).
     mask_p, mask_q: [kP] / [kQ] bool, clusters that take part.
+    attention_p, attention_q: optional [kP] / [kQ] >= 0 factors of the weights.
 
   Returns:
     R [3, 3] and t [3] metres with R p + t ~ q. Finite for any finite input.
   """
-  w = descriptor_weights(feat_p, feat_q, alpha, mask_p, mask_q)
+  w = descriptor_weights(feat_p, feat_q, alpha, mask_p, mask_q, attention_p, attention_q)
   return weighted_kabsch(xyz_p, xyz_q, w)

@@ -56,6 +56,7 @@ class Model:
   @classmethod
   def from_config(cls, config: ml_collections.ConfigDict, variables) -> 'Model':
     net = network.FeatureNet(descriptor_dim=config.model.descriptor_dim,
+                             use_orientation=config.model.get('use_orientation', True),
                              bn_momentum=config.model.bn_momentum)
     return cls(net, variables, float(config.model.radius), int(config.model.num_samples))
 

@@ -16,6 +16,14 @@ import ml_collections
 from ssd_jax import augment, cf, geometry, grouping, losses
 
 
+def _apply(model, variables, clusters, train):
+  """-> ((descriptors, attention, angle), batch_stats after the call)."""
+  if train:
+    out, mutated = model.apply(variables, clusters, train=True, mutable=['batch_stats'])
+    return out, mutated['batch_stats']
+  return model.apply(variables, clusters, train=False), variables['batch_stats']
+
+
 def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,
                          points: jax.Array, valid: jax.Array,
                          cfg: ml_collections.ConfigDict, train: bool = True):
@@ -54,17 +62,15 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
                                                cfg.num_samples)
 
   # Both branches in one call: shared weights, and BatchNorm statistics over both.
-  if train:
-    (desc, _, _), mutated = model.apply(variables, clusters, train=True,
-                                        mutable=['batch_stats'])
-    new_batch_stats = mutated['batch_stats']
-  else:
-    desc, _, _ = model.apply(variables, clusters, train=False)
-    new_batch_stats = variables['batch_stats']
+  (desc, attention, _), new_batch_stats = _apply(model, variables, clusters, train)
 
   mask = has_nb & jnp.concatenate([cvalid1, cvalid2], 0)
-  r_est, _ = jax.vmap(lambda xp, xq, fp, fq, mp, mq: cf.cf_solve(xp, xq, fp, fq, cfg.alpha, mp, mq))(
-      centers[:b], centers[b:], desc[:b], desc[b:], mask[:b], mask[b:])
+  # The self-supervised detector (an extension): w_ij * a_i * b_j, so attention gets a
+  # gradient from single unlabeled clouds. Off, the attention head gets none (paper).
+  att = attention if cfg.attention_in_cf else jnp.ones_like(attention)
+  r_est, _ = jax.vmap(lambda xp, xq, fp, fq, mp, mq, ap, aq: cf.cf_solve(
+      xp, xq, fp, fq, cfg.alpha, mp, mq, ap, aq))(
+          centers[:b], centers[b:], desc[:b], desc[b:], mask[:b], mask[b:], att[:b], att[b:])
   per_pair = losses.rotation_loss(r_est, r_gt, cfg.loss)
   metrics = {
       'loss': jnp.mean(per_pair),
@@ -72,3 +78,73 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
       'rotation_deg': jnp.mean(geometry.geodesic_angle_deg(r_gt, jnp.eye(3))),
   }
   return metrics['loss'], (metrics, new_batch_stats)
+
+
+def _best_match_distance(feat_a: jax.Array, feat_o: jax.Array, mask_o: jax.Array) -> jax.Array:
+  """For each anchor descriptor [kA, D], the Euclidean distance to its nearest valid
+  descriptor of the other cloud [kO, D] (mask [kO]) -> [kA]."""
+  d2 = (jnp.sum(feat_a * feat_a, -1)[:, None] + jnp.sum(feat_o * feat_o, -1)[None, :]
+        - 2.0 * feat_a @ feat_o.T)
+  d2 = jnp.where(mask_o[None, :], d2, jnp.inf)
+  # The floor keeps sqrt's gradient finite for identical descriptors.
+  return jnp.sqrt(jnp.maximum(jnp.min(d2, axis=1), 1e-12))
+
+
+def attention_weighted_triplet(desc: jax.Array, attention: jax.Array, mask: jax.Array,
+                               margin: float) -> tuple[jax.Array, dict[str, jax.Array]]:
+  """3DFeat-Net's loss (REFERENCE §3) for one triplet.
+
+  desc [3, k, D] (anchor, positive, negative), attention [3, k] >= 0, mask [3, k]
+  bool. For anchor cluster i: d_pos = distance to its best match in the positive
+  cloud, d_neg the same in the negative; weight = softmax of the anchor's
+  attention over its valid clusters. -> (sum_i w_i max(0, d_pos - d_neg + margin), stats).
+  """
+  d_pos = _best_match_distance(desc[0], desc[1], mask[1])
+  d_neg = _best_match_distance(desc[0], desc[2], mask[2])
+  w = jax.nn.softmax(jnp.where(mask[0], attention[0], -jnp.inf))
+  hinge = jnp.maximum(d_pos - d_neg + margin, 0.0)
+  stats = {'positive_distance': jnp.sum(w * d_pos), 'negative_distance': jnp.sum(w * d_neg),
+           'triplet_accuracy': jnp.sum(w * (d_pos < d_neg))}
+  return jnp.sum(w * hinge), stats
+
+
+def triplet_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,
+                 points: jax.Array, valid: jax.Array, cfg: ml_collections.ConfigDict,
+                 train: bool = True):
+  """3DFeat-Net's weakly supervised loss of a batch of triplets.
+
+  Args:
+    points: [B, 3, N, 3] metres: anchor, positive and negative cloud of each triplet.
+    valid: [B, 3, N] bool.
+    cfg: the `model` section; `augmentations` lists which of jitter, rotate_small,
+      shift, rotate_1d run (each cloud draws its own).
+  Returns:
+    (loss, (metrics, new_batch_stats)).
+  """
+  b, three, n, _ = points.shape
+  flat, flat_valid = points.reshape(b * three, n, 3), valid.reshape(b * three, n)
+  k_aug, k_centers = jax.random.split(key)
+  aug_keys = jax.random.split(k_aug, 4)
+  if 'jitter' in cfg.augmentations:
+    flat = augment.jitter(aug_keys[0], flat, cfg.jitter_sigma, cfg.jitter_clip)
+  if 'rotate_small' in cfg.augmentations:
+    flat = augment.rotate_small(aug_keys[1], flat)
+  if 'shift' in cfg.augmentations:
+    flat = augment.shift(aug_keys[2], flat)
+  if 'rotate_1d' in cfg.augmentations:
+    flat = augment.rotate_1d(aug_keys[3], flat)
+  idx, cvalid = grouping.sample_centers(k_centers, flat, flat_valid, cfg.num_clusters,
+                                        cfg.center_sampling)
+  centers = jnp.take_along_axis(flat, idx[..., None], axis=1)
+  clusters, has_nb = grouping.extract_clusters(flat, flat_valid, centers, cfg.radius,
+                                               cfg.num_samples)
+  (desc, attention, _), new_batch_stats = _apply(model, variables, clusters, train)
+  k = cfg.num_clusters
+  per_triplet, stats = jax.vmap(lambda d, a, m: attention_weighted_triplet(d, a, m, cfg.margin))(
+      desc.reshape(b, three, k, -1), attention.reshape(b, three, k),
+      (has_nb & cvalid).reshape(b, three, k))
+  metrics = {'loss': jnp.mean(per_triplet), **{key_: jnp.mean(v) for key_, v in stats.items()}}
+  return metrics['loss'], (metrics, new_batch_stats)
+
+
+OBJECTIVES = {'self_supervised': self_supervised_loss, 'triplet': triplet_loss}

@@ -27,6 +27,9 @@ from ssd_jax import grouping
 from ssd_jax.data import pipeline
 
 
+AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
+
+
 class ConfigError(ValueError):
   """A config value is out of range or inconsistent."""
 
@@ -58,6 +61,13 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
     if not ok:
       raise ConfigError(msg)
 
+  require(config.objective in objective.OBJECTIVES,
+          f'objective must be one of {tuple(objective.OBJECTIVES)}, got {config.objective!r}')
+  bad = set(m.augmentations) - set(AUGMENTATIONS)
+  require(not bad, f'model.augmentations: unknown {sorted(bad)}; choose from {AUGMENTATIONS}')
+  require(m.margin >= 0, f'model.margin must be >= 0, got {m.margin}')
+  require(not (m.attention_in_cf and not m.use_orientation),
+          'model.attention_in_cf needs model.use_orientation (the detector predicts attention)')
   require(m.descriptor_dim in network.DESCRIPTOR_DIMS,
           f'model.descriptor_dim must be one of {network.DESCRIPTOR_DIMS}, got {m.descriptor_dim}')
   require(m.num_clusters >= 3, f'model.num_clusters must be >= 3, got {m.num_clusters}')
@@ -86,6 +96,7 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
 
 def create_model(config: ml_collections.ConfigDict) -> network.FeatureNet:
   return network.FeatureNet(descriptor_dim=config.model.descriptor_dim,
+                            use_orientation=config.model.get('use_orientation', True),
                             bn_momentum=config.model.bn_momentum)
 
 
@@ -108,17 +119,19 @@ def create_train_state(config: ml_collections.ConfigDict, key: jax.Array) -> Tra
 
 def train_step(state: TrainState, points: jax.Array, *, model: network.FeatureNet,
                config: ml_collections.ConfigDict) -> tuple[TrainState, dict[str, jax.Array]]:
-  """One self-supervised Adam step on a batch of clouds [B, N, 3] metres.
+  """One Adam step of `config.objective`: self-supervised on clouds [B, N, 3] metres,
+  or triplet on [B, 3, N, 3] (anchor, positive, negative).
 
   A non-finite loss or gradient leaves params, optimizer and BatchNorm state
   untouched (the step counter still advances) and reports `finite = False`.
   """
   key = jax.random.fold_in(jax.random.wrap_key_data(state.rng), state.step)
-  valid = jnp.ones(points.shape[:2], bool)
+  valid = jnp.ones(points.shape[:-1], bool)
+  loss_of = objective.OBJECTIVES[config.objective]
 
   def loss_fn(params):
     variables = {'params': params, 'batch_stats': state.batch_stats}
-    return objective.self_supervised_loss(model, variables, key, points, valid, config.model)
+    return loss_of(model, variables, key, points, valid, config.model)
 
   (loss, (metrics, batch_stats)), grads = jax.value_and_grad(loss_fn, has_aux=True)(state.params)
   grad_norm = optax.tree.norm(grads)
@@ -212,7 +225,7 @@ def _check_finite(pending: list[tuple[int, dict]], ckpt: checkpoint.Checkpointer
 
 def check_resumable(config: ml_collections.ConfigDict, stored: dict, directory: str) -> None:
   """Refuse to continue a checkpoint written with a different model or seed."""
-  current = config.to_dict()
+  current = json.loads(json.dumps(config.to_dict()))   # tuples -> lists, as stored
   for section in ('model',):
     for key, value in current[section].items():
       if stored.get(section, {}).get(key) != value:
@@ -222,6 +235,27 @@ def check_resumable(config: ml_collections.ConfigDict, stored: dict, directory: 
   if stored.get('seed') != config.seed:
     raise ConfigError(f'{directory} holds a run with seed={stored.get("seed")}, but the config '
                       f'says {config.seed}; use a new --workdir or the same seed')
+
+
+def initialize_from(state: TrainState, source: str,
+                    config: ml_collections.ConfigDict) -> TrainState:
+  """3DFeat-Net's stage hand-over: `state` (fresh) with the descriptor weights and
+  BatchNorm statistics of the run in `source`; the detector keeps its fresh
+  initialisation and the optimizer starts anew."""
+  from ssd_jax import inference  # pylint: disable=g-import-not-at-top
+  try:
+    src = inference.load(source).variables
+  except FileNotFoundError as e:
+    raise ConfigError(f'train.init_from: {e}') from None
+  if src['params']['descriptor'].keys() != state.params['descriptor'].keys() or any(
+      a.shape != b.shape for a, b in zip(jax.tree.leaves(src['params']['descriptor']),
+                                         jax.tree.leaves(state.params['descriptor']))):
+    raise ConfigError(f'train.init_from: {source} has a different descriptor '
+                      '(model.descriptor_dim must match)')
+  params = {**state.params, 'descriptor': src['params']['descriptor']}
+  batch_stats = {**state.batch_stats, 'descriptor': src['batch_stats']['descriptor']}
+  return state.replace(params=params, batch_stats=batch_stats,
+                       opt_state=create_optimizer(config).init(params))
 
 
 def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> TrainState:
@@ -237,9 +271,12 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
                       'train.txt or a cloud file (--config.data.path=...)')
   os.makedirs(workdir, exist_ok=True)
   t_cfg = config.train
-  dataset = pipeline.CloudDataset.from_source(
-      config.data.path, fmt=config.data.format, crop_radius=config.data.crop_radius,
-      min_points=config.data.min_points)
+  data_kwargs = dict(fmt=config.data.format, crop_radius=config.data.crop_radius,
+                     min_points=config.data.min_points)
+  if config.objective == 'triplet':
+    dataset = pipeline.TripletDataset(config.data.path, **data_kwargs)
+  else:
+    dataset = pipeline.CloudDataset.from_source(config.data.path, **data_kwargs)
   eval_points = None
   if config.data.eval_path:
     eval_set = pipeline.CloudDataset.from_source(
@@ -255,6 +292,9 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
     check_resumable(config, ckpt.restore_config(), ckpt.directory)
     state, _ = ckpt.restore(checkpoint.abstract_like(state))
     logging.info('Resumed from step %d in %s', int(state.step), ckpt.directory)
+  elif t_cfg.get('init_from'):
+    state = replicate(initialize_from(jax.device_get(state), t_cfg.init_from, config), mesh)
+    logging.info('Descriptor initialised from %s', t_cfg.init_from)
   start = int(state.step)
   writer = MetricsWriter(os.path.join(workdir, 'metrics.jsonl'), start)
   step_fn = jit_train_step(config, mesh)
@@ -286,9 +326,12 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
             ev = jax.device_get(eval_fn(state, jnp.asarray(eval_points), eval_key))
             record.update({f'eval_{k}': float(v) for k, v in ev.items()})
           writer.write(record)
-          bar.set_postfix(loss=f"{record['loss']:.4f}",
-                          rot_err=f"{record['rotation_error_deg']:.2f}deg",
-                          sps=f"{record['steps_per_sec']:.2f}")
+          shown = {'loss': f"{record['loss']:.4f}"}
+          if 'rotation_error_deg' in record:
+            shown['rot_err'] = f"{record['rotation_error_deg']:.2f}deg"
+          if 'triplet_accuracy' in record:
+            shown['acc'] = f"{record['triplet_accuracy']:.3f}"
+          bar.set_postfix(**shown, sps=f"{record['steps_per_sec']:.2f}")
           t_last, steps_since, pending = time.perf_counter(), 0, []
         ckpt.save(step + 1, state, config, force=done)
   finally:

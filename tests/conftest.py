@@ -20,11 +20,13 @@ def shared_path(*parts) -> Path:
 
 @pytest.fixture(scope='session')
 def synthetic_root(tmp_path_factory):
-  """A tiny synthetic data root (train/, test_kitti/, test_oxford/, clusters/ with 24 pairs)."""
+  """A tiny synthetic data root (train/ of 2 scenes, test_kitti/, test_oxford/, clusters/ with
+  24 pairs)."""
   from ssd_jax.synthetic import dataset  # pylint: disable=g-import-not-at-top
   from tests.test_synthetic import tiny_config as synthetic_config  # pylint: disable=g-import-not-at-top
   config = synthetic_config()
   config.clusters.num_pairs = 24
+  config.train.num_scenes = 2     # clouds of another scene are the triplet negatives
   out = tmp_path_factory.mktemp('synthetic_root') / 'tiny'
   dataset.generate(config, out)
   return out

@@ -148,7 +148,8 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
       [sys.executable, '-m', 'experiments.reproduce', f'--data_root={synthetic_root}',
        f'--workdir={out}', '--config=configs/reproduce_small.py', '--config.max_pairs=2',
        '--config.fpfh_max_nn=50', f'--config.checkpoints.ours={tiny_checkpoint}',
-       f'--config.checkpoints.feat3dnet={tmp_path / "none"}'],
+       f'--config.checkpoints.feat3dnet={tmp_path / "none"}',
+       f'--config.checkpoints.ours_detector={tmp_path / "none"}'],
       cwd=ROOT, capture_output=True, text=True, timeout=900)
   assert run.returncode == 0, run.stderr[-3000:]
   report = (out / 'report.md').read_text()
@@ -161,7 +162,7 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   for png in ('fig4_precision_oxford.png', 'descriptor_matching_roc.png', 'fig3_keypoints.png',
               'registration_oxford_iss_ours.png'):
     assert (out / png).stat().st_size > 10_000, png
-  assert '[1/6] Table I' in run.stderr and '[6/6] Figures' in run.stderr
+  assert '[1/8] Table I' in run.stderr and '[8/8] Figures' in run.stderr
 
   # The table's numbers are recomputed: redo ISS + FPFH on the same two pairs here.
   pairs = benchmarks.read_registration_set(synthetic_root / 'test_oxford')[:2]

@@ -121,6 +121,56 @@ class CloudDataset:
     return out
 
 
+class TripletDataset:
+  """3DFeat-Net's training triplets from an Oxford `train.txt` (REFERENCE §3).
+
+  Each anchor is a cloud with at least one positive; its positive is drawn from its
+  `positives`, its negative from the clouds that are neither positive, non-negative
+  nor the anchor itself. Clouds load through a `CloudDataset` (cleaned, cropped,
+  cached). `source`: the index file or a directory holding `train.txt`.
+  """
+
+  def __init__(self, source: str | os.PathLike, **kwargs):
+    source = Path(source)
+    index = source / 'train.txt' if source.is_dir() else source
+    if not index.is_file():
+      raise CloudDataError(f'{source}: triplet training needs a 3DFeat-Net train.txt (file | '
+                           'positives | non-negatives); none found')
+    entries = io.read_oxford_index(index)
+    n = len(entries)
+    self.clouds = CloudDataset([e.path for e in entries], **kwargs)
+    self.positives = [np.asarray(e.positives, np.int64) for e in entries]
+    self.negatives = []
+    for i, e in enumerate(entries):
+      bad = [j for j in (*e.positives, *e.non_negatives) if not 0 <= j < n]
+      if bad:
+        raise CloudDataError(f'{index}: line {i + 1} refers to clouds {bad[:5]} of only {n}')
+      self.negatives.append(np.setdiff1d(np.arange(n), [i, *e.positives, *e.non_negatives]))
+    self.anchors = np.array([i for i in range(n) if len(self.positives[i]) and
+                             len(self.negatives[i])], np.int64)
+    if not len(self.anchors):
+      raise CloudDataError(f'{index}: no cloud has both a positive and a negative; triplets '
+                           'need clouds less than ~10 m and more than ~50 m apart')
+
+  def __len__(self) -> int:
+    return len(self.anchors)
+
+  def batch(self, seed: int, step: int, batch_size: int, num_points: int) -> np.ndarray:
+    """The triplets of `step`: [batch_size, 3, num_points, 3] float32 (anchor, positive,
+    negative). Anchors are visited in seeded epochs; partners draw from (seed, step)."""
+    rng = np.random.default_rng((seed, step, 3))
+    out = np.empty((batch_size, 3, num_points, 3), np.float32)
+    for slot in range(batch_size):
+      epoch, pos = divmod(step * batch_size + slot, len(self.anchors))
+      order = np.random.default_rng((seed, 1_000_003, epoch)).permutation(len(self.anchors))
+      a = int(self.anchors[order[pos]])
+      p = int(rng.choice(self.positives[a]))
+      q = int(rng.choice(self.negatives[a]))
+      for j, i in enumerate((a, p, q)):
+        out[slot, j] = subsample(rng, self.clouds.cloud(i), num_points)
+    return out
+
+
 def prefetch(make_batch, steps: range, depth: int = 4, workers: int = 2) -> Iterator[np.ndarray]:
   """Yield make_batch(step) for step in steps, computed ahead in worker threads.
 

@@ -23,7 +23,7 @@ from ssd_jax.registration import features as features_lib, pipeline
 BUILTIN_KEYPOINTS = ('iss', 'random')
 BUILTIN_DESCRIPTORS = ('fpfh',)
 NAMES = {'iss': 'ISS', 'random': 'random', 'fpfh': 'FPFH', 'ours': 'Ours',
-         'feat3dnet': '3DFeat-Net'}
+         'feat3dnet': '3DFeat-Net', 'ours_detector': 'Ours (self-sup. detector)'}
 
 
 def split_row(row: str) -> tuple[str, str]:

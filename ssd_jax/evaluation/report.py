@@ -11,7 +11,7 @@ import numpy as np
 
 from ssd_jax import viz
 from ssd_jax.evaluation import (descriptor_matching, features, paper, precision, registration,
-                                tables)
+                                repeatability, tables)
 
 
 def _write(workdir: str, name: str, text: str) -> None:
@@ -104,4 +104,25 @@ def descriptor_matching_outputs(distances: Mapping[str, np.ndarray], labels: np.
           (f'\n{notes}' if notes else '') +
           (f'\n![ROC]({name}_roc.png)\n' if distances else ''))
   _write(workdir, f'{name}.md', text)
+  return text
+
+
+def repeatability_outputs(results: Mapping[str, dict], sources: Sequence[str],
+                          missing: Mapping[str, str], workdir: str, description: str,
+                          radius: float = repeatability.RADIUS,
+                          name: str = 'repeatability') -> str:
+  """WORKDIR/{name}.md and .csv: repeatability and keypoint count per detector."""
+  header = ['keypoints', f'repeatability within {radius:g} m (%)', 'keypoints per cloud']
+  table = []
+  for s in sources:
+    if s in results:
+      table.append([features.NAMES.get(s, s), tables.fmt(100 * results[s]['repeatability']),
+                    tables.fmt(results[s]['keypoints'], 0)])
+    else:
+      table.append([features.NAMES.get(s, s), 'missing', missing.get(s, '-')])
+  text = (f'Keypoint repeatability on {description}: share of cloud-1 keypoints with a cloud-2 '
+          f'keypoint within {radius:g} m after the ground-truth alignment, mean over pairs.\n\n'
+          + tables.markdown_table(header, table))
+  _write(workdir, f'{name}.md', text)
+  tables.write_csv(os.path.join(workdir, f'{name}.csv'), header, table)
   return text

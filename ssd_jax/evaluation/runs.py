@@ -10,7 +10,8 @@ from typing import Sequence
 import ml_collections
 
 from ssd_jax.data import clusters
-from ssd_jax.evaluation import descriptor_matching, features, precision, registration, report
+from ssd_jax.evaluation import (descriptor_matching, features, precision, registration,
+                                repeatability, report)
 
 
 def open_store(config: ml_collections.ConfigDict, rows: Sequence[str]):
@@ -62,3 +63,14 @@ def run_descriptor_matching(config, folder, workdir: str, description: str | Non
   return report.descriptor_matching_outputs(
       distances, labels, iss_distance, tuple(config.r_th), missing, workdir,
       description or f'{folder} ({len(pairs)} pairs)', recall=config.recall)
+
+
+def run_repeatability(config, pairs, store, missing, workdir: str, description: str,
+                      name: str = 'repeatability') -> str:
+  """Keypoint repeatability of config.keypoint_sources on `pairs`: WORKDIR/{name}.md, .csv."""
+  sources = [s for s in config.keypoint_sources if s not in missing]
+  os.makedirs(workdir, exist_ok=True)
+  results = repeatability.evaluate_repeatability(pairs, sources, store,
+                                                 config.repeatability_radius)
+  return report.repeatability_outputs(results, list(config.keypoint_sources), missing, workdir,
+                                      description, config.repeatability_radius, name)

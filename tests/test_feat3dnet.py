@@ -1,0 +1,125 @@
+"""The weakly supervised 3DFeat-Net baseline: triplet loss, triplet data, stage hand-over,
+the self-supervised detector and keypoint repeatability."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ssd_jax import geometry, objective, train
+from ssd_jax.data import pipeline
+from ssd_jax.evaluation import repeatability
+
+
+def test_attention_weighted_triplet_by_hand():
+  s = np.sqrt(0.5)
+  # anchor clusters a0 = (1, 0), a1 = (0, 1); positive holds (1, 0) and (s, s);
+  # negative holds (s, s) and (-1, 0); the negative's second cluster is masked out.
+  desc = jnp.array([[[1.0, 0.0], [0.0, 1.0]],
+                    [[1.0, 0.0], [s, s]],
+                    [[s, s], [-1.0, 0.0]]])
+  attention = jnp.array([[np.log(3.0), 0.0], [0.0, 0.0], [0.0, 0.0]])
+  mask = jnp.array([[True, True], [True, True], [True, False]])
+  loss, stats = objective.attention_weighted_triplet(desc, attention, mask, margin=0.2)
+  d_sq = np.sqrt(2 - 2 * s)              # distance between (1, 0) and (s, s), also (0, 1)-(s, s)
+  d_pos = np.array([0.0, d_sq])          # a0 matches exactly, a1's best is (s, s)
+  d_neg = np.array([d_sq, d_sq])         # only (s, s) is valid in the negative
+  w = np.exp([np.log(3.0), 0.0]) / 4.0   # softmax of the anchor attention: 0.75, 0.25
+  expected = np.sum(w * np.maximum(d_pos - d_neg + 0.2, 0.0))   # 0.75 * 0 + 0.25 * 0.2
+  assert float(loss) == pytest.approx(expected, abs=1e-5) and expected == pytest.approx(0.05)
+  assert float(stats['triplet_accuracy']) == pytest.approx(0.75)
+  grad = jax.grad(lambda a: objective.attention_weighted_triplet(desc, a, mask, 0.2)[0])(attention)
+  assert float(grad[0, 0]) < 0 < float(grad[0, 1])   # attention moves to the cluster that matches
+
+
+def test_triplet_dataset_draws_valid_triplets(synthetic_root):
+  data = pipeline.TripletDataset(synthetic_root / 'train')
+  from ssd_jax.data import io  # pylint: disable=g-import-not-at-top
+  entries = io.read_oxford_index(synthetic_root / 'train' / 'train.txt')
+  for a in data.anchors:
+    assert set(data.positives[a]) == set(entries[a].positives)
+    banned = {a, *entries[a].positives, *entries[a].non_negatives}
+    assert not banned & set(data.negatives[a].tolist()) and len(data.negatives[a])
+  b1 = data.batch(0, 3, 2, 256)
+  assert b1.shape == (2, 3, 256, 3)
+  np.testing.assert_array_equal(b1, data.batch(0, 3, 2, 256))
+  assert not np.array_equal(b1, data.batch(0, 4, 2, 256))
+  with pytest.raises(pipeline.CloudDataError, match='needs a 3DFeat-Net train.txt'):
+    pipeline.TripletDataset(synthetic_root / 'test_kitti' / '00')
+
+
+def _triplet_config(tiny_config, root, stage):
+  config = tiny_config
+  config.objective = 'triplet'
+  config.data.path = str(root / 'train')
+  config.model.use_orientation = stage == 'full'
+  config.model.augmentations = (('jitter', 'rotate_small', 'shift') if stage == 'pretrain'
+                                else ('jitter', 'rotate_small', 'shift', 'rotate_1d'))
+  return config
+
+
+def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_root, tmp_path):
+  pre = _triplet_config(tiny_config, synthetic_root, 'pretrain')
+  pre.train.num_steps = 2
+  pre_state = train.train_and_evaluate(pre, str(tmp_path / 'pre'))
+  assert 'detector' not in pre_state.params     # stage 1 has no detector
+  full = _triplet_config(tiny_config.copy_and_resolve_references(), synthetic_root, 'full')
+  fresh = train.create_train_state(full, jax.random.key(full.seed))
+  handed = train.initialize_from(jax.device_get(fresh), str(tmp_path / 'pre'), full)
+  jax.tree.map(np.testing.assert_array_equal, handed.params['descriptor'],
+               jax.device_get(pre_state.params['descriptor']))
+  jax.tree.map(np.testing.assert_array_equal, handed.batch_stats['descriptor'],
+               jax.device_get(pre_state.batch_stats['descriptor']))
+  jax.tree.map(np.testing.assert_array_equal, handed.params['detector'], fresh.params['detector'])
+  with pytest.raises(train.ConfigError, match='train.init_from: .*no such checkpoint'):
+    train.initialize_from(fresh, str(tmp_path / 'nowhere'), full)
+  # ... and through the training entry: stage 2 starts from stage 1's descriptor.
+  full.train.num_steps, full.train.init_from = 2, str(tmp_path / 'pre')
+  full.train.learning_rate = 1e-12   # two steps that barely move the weights
+  state = jax.device_get(train.train_and_evaluate(full, str(tmp_path / 'full')))
+  np.testing.assert_allclose(state.params['descriptor']['out']['kernel'],
+                             pre_state.params['descriptor']['out']['kernel'], atol=1e-6)
+
+
+@pytest.mark.parametrize('override, message', [
+    (dict(objective='contrastive'), 'objective must be one of'),
+    (dict(augmentations=('jitter', 'flip')), "model.augmentations: unknown \\['flip'\\]"),
+    (dict(attention_in_cf=True, use_orientation=False), 'attention_in_cf needs'),
+])
+def test_baseline_config_errors(tiny_config, override, message):
+  for key, value in override.items():
+    if key == 'objective':
+      tiny_config.objective = value
+    else:
+      tiny_config.model[key] = value
+  with pytest.raises(train.ConfigError, match=message):
+    train.check_config(tiny_config)
+
+
+def _attention_grad(config):
+  model = train.create_model(config)
+  state = train.create_train_state(config, jax.random.key(0))
+  pts = jnp.asarray(np.random.default_rng(0).uniform(-8, 8, (2, 512, 3)) * [1, 1, 0.25],
+                    jnp.float32)
+
+  def loss(params):
+    variables = {'params': params, 'batch_stats': state.batch_stats}
+    return objective.self_supervised_loss(model, variables, jax.random.key(1), pts,
+                                          jnp.ones(pts.shape[:2], bool), config.model)[0]
+  return jax.grad(loss)(state.params)['detector']['attention']['kernel']
+
+
+def test_self_supervised_detector_trains_attention_only_when_on(tiny_config):
+  assert float(jnp.abs(_attention_grad(tiny_config)).max()) == 0.0   # the paper: no gradient
+  tiny_config.model.attention_in_cf = True
+  assert float(jnp.abs(_attention_grad(tiny_config)).max()) > 1e-6
+
+
+def test_keypoint_repeatability_by_hand():
+  t12 = np.asarray(geometry.make_transform(np.asarray(geometry.rotation_z(np.pi / 2)),
+                                           np.array([1.0, 0, 0])))
+  kp2 = np.array([[0.0, 0, 0], [2, 0, 0]])          # land at (1, 0, 0) and (1, 2, 0)
+  kp1 = np.array([[1.0, 0.4, 0], [1, 2.6, 0], [3, 0, 0], [1, 1.9, 0.1]])
+  assert repeatability.keypoint_repeatability(kp1, kp2, t12) == pytest.approx(0.5)
+  assert repeatability.keypoint_repeatability(kp1, kp2[:0], t12) == 0.0
+  assert np.isnan(repeatability.keypoint_repeatability(kp1[:0], kp2, t12))
