@@ -122,3 +122,16 @@ def test_ransac_refuses_too_few_samples():
   for fn in (ransac.ransac, ransac.ransac_sequential):
     with pytest.raises(ValueError, match='max_trials \\+ 1 = 10001 trials but got 100 samples'):
       fn(xyz1, xyz2, samples)
+
+
+def test_fpfh_follows_the_keypoint_order():
+  """Open3D returns features in ascending index order; learned keypoints come strongest
+  first, so the wrapper must map them back (a bug that once zeroed the learned-keypoint
+  + FPFH rows)."""
+  from ssd_jax.registration import features  # pylint: disable=g-import-not-at-top
+  pts = np.random.default_rng(0).normal(size=(2000, 3)) * 5
+  idx = np.array([500, 3, 1200, 7, 3])
+  ordered = features.fpfh(pts, idx, radius=2.0)
+  ref = features.fpfh(pts, np.array([3, 7, 500, 1200]), radius=2.0)
+  np.testing.assert_array_equal(ordered, ref[[2, 0, 3, 1, 0]])
+  assert np.abs(ref[0] - ref[1]).sum() > 1.0

@@ -26,6 +26,8 @@ def fpfh(points: np.ndarray, keypoints: np.ndarray, radius: float = FPFH_RADIUS,
     pcd.orient_normals_towards_camera_location(np.zeros(3))
   else:
     pcd.normals = o3d.utility.Vector3dVector(np.asarray(normals, np.float64))
-  feat = o3d.pipelines.registration.compute_fpfh_feature(
-      pcd, search, [int(i) for i in keypoints])
-  return np.asarray(feat.data, np.float32).T
+  # Open3D returns the features in ascending index order whatever order it is given,
+  # so compute at the sorted unique indices and map back to the caller's order.
+  unique, inverse = np.unique(np.asarray(keypoints, np.int64), return_inverse=True)
+  feat = o3d.pipelines.registration.compute_fpfh_feature(pcd, search, [int(i) for i in unique])
+  return np.asarray(feat.data, np.float32).T[inverse.reshape(-1)]
