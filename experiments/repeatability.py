@@ -10,7 +10,6 @@ from absl import app
 from absl import flags
 from ml_collections import config_flags
 
-from ssd_jax.data import benchmarks
 from ssd_jax.evaluation import runs
 from ssd_jax.logging_utils import quiet_libraries
 
@@ -27,9 +26,7 @@ def main(argv):
   config = FLAGS.config
   try:   # bad names, missing, truncated or degenerate clouds: one line, no traceback
     store, missing = runs.open_store(config, [f'{s}+fpfh' for s in config.keypoint_sources])
-    pairs = benchmarks.read_registration_set(config.dataset)
-    if config.max_pairs:
-      pairs = pairs[:config.max_pairs]
+    pairs = runs.load_pairs(config)
     print(runs.run_repeatability(config, pairs, store, missing, FLAGS.workdir,
                                  f'{config.dataset} ({len(pairs)} pairs)'))
   except ValueError as e:

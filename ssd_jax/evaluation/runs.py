@@ -9,9 +9,15 @@ from typing import Sequence
 
 import ml_collections
 
-from ssd_jax.data import clusters
+from ssd_jax.data import benchmarks, clusters
 from ssd_jax.evaluation import (descriptor_matching, features, precision, registration,
                                 repeatability, report)
+
+
+def load_pairs(config: ml_collections.ConfigDict) -> list:
+  """The registration pairs of config.dataset, the first config.max_pairs (0 = all)."""
+  pairs = benchmarks.read_registration_set(config.dataset)
+  return pairs[:config.max_pairs] if config.max_pairs else pairs
 
 
 def open_store(config: ml_collections.ConfigDict, rows: Sequence[str]):
