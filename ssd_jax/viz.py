@@ -86,6 +86,19 @@ def plot_registration(points1: np.ndarray, points2: np.ndarray, kp1: np.ndarray,
   plt.close(fig)
 
 
+def _finish_curve_plot(plt, fig, ax, path, xlim, xlabel, ylabel, title) -> None:
+  """Percent y axis, grid, legend, save and close: shared by the curve figures."""
+  ax.set_xlim(*xlim)
+  ax.set_ylim(0, 100)
+  ax.set_xlabel(xlabel)
+  ax.set_ylabel(ylabel)
+  ax.set_title(title)
+  ax.grid(alpha=0.3)
+  ax.legend(loc='lower right', fontsize=8)
+  fig.savefig(path, dpi=120, bbox_inches='tight')
+  plt.close(fig)
+
+
 def plot_precision(thresholds: np.ndarray, curves: dict, path: str | os.PathLike,
                    title: str = 'Precision of nearest-neighbour matches', marker: float = 1.0) -> None:
   """Paper Fig. 4: fraction of matches within x metres of the ground truth.
@@ -99,15 +112,8 @@ def plot_precision(thresholds: np.ndarray, curves: dict, path: str | os.PathLike
     ax.plot(thresholds, 100 * np.asarray(curve), lw=1.6, label=label)
   ax.axvline(marker, color='k', ls='--', lw=0.8)
   ax.text(marker, 2, f' x = {marker:g} m', fontsize=8)
-  ax.set_xlim(0, float(np.max(thresholds)))
-  ax.set_ylim(0, 100)
-  ax.set_xlabel('distance to ground-truth location x (m)')
-  ax.set_ylabel('precision (%)')
-  ax.set_title(title)
-  ax.grid(alpha=0.3)
-  ax.legend(loc='lower right', fontsize=8)
-  fig.savefig(path, dpi=120, bbox_inches='tight')
-  plt.close(fig)
+  _finish_curve_plot(plt, fig, ax, path, (0, float(np.max(thresholds))),
+                     'distance to ground-truth location x (m)', 'precision (%)', title)
 
 
 def plot_roc(curves: dict, path: str | os.PathLike, recall: float = 0.95,
@@ -119,15 +125,8 @@ def plot_roc(curves: dict, path: str | os.PathLike, recall: float = 0.95,
     ax.plot(100 * np.asarray(fpr), 100 * np.asarray(tpr), lw=1.6, label=label)
   ax.plot([0, 100], [0, 100], color='0.6', lw=0.8, ls=':')
   ax.axhline(100 * recall, color='k', ls='--', lw=0.8)
-  ax.set_xlim(0, 100)
-  ax.set_ylim(0, 100)
-  ax.set_xlabel('false-positive rate (%)')
-  ax.set_ylabel('recall (%)')
-  ax.set_title(title)
-  ax.grid(alpha=0.3)
-  ax.legend(loc='lower right', fontsize=8)
-  fig.savefig(path, dpi=120, bbox_inches='tight')
-  plt.close(fig)
+  _finish_curve_plot(plt, fig, ax, path, (0, 100), 'false-positive rate (%)', 'recall (%)',
+                     title)
 
 
 def plot_keypoints(points: np.ndarray, keypoints: dict, path: str | os.PathLike,

@@ -12,7 +12,8 @@ import pytest
 
 from ssd_jax import geometry, inference, train
 from ssd_jax.data import benchmarks, clusters, io
-from ssd_jax.evaluation import descriptor_matching, features, precision, registration
+from ssd_jax.evaluation import (descriptor_matching, features, precision, registration,
+                                repeatability)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -178,6 +179,12 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   prec = _csv(out / 'fig4_precision_oxford.csv')
   assert prec[0][:2] == ['x (m)', 'iss+fpfh'] and len(prec) == 101
   np.testing.assert_allclose([float(r[1]) for r in prec[1:]], curve['curve'], atol=1e-5)
+
+  # Repeatability: ISS and random ran, the missing detectors are reported as missing.
+  rep = {r[0]: r for r in _csv(out / 'repeatability_oxford.csv')}
+  iss = repeatability.evaluate_repeatability(pairs, ['iss'], store, progress=False)['iss']
+  assert float(rep['ISS'][1]) == pytest.approx(100 * iss['repeatability'], abs=0.01)
+  assert rep['3DFeat-Net'][1] == 'missing' and '## Keypoint repeatability on kitti' in report
 
   # Table III from the per-pair distances it saved, and the cluster labels on disk.
   saved = np.load(out / 'distances.npz')
