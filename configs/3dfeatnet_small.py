@@ -30,10 +30,11 @@ def get_config(stage: str = 'full'):
   config.train.log_every = 20
   config.train.eval_every = 100
   if stage == 'pretrain':
-    config.train.num_steps = 200
+    config.train.num_steps = 600
     config.train.checkpoint_every = 200
   else:
-    config.train.num_steps = 400
-    config.train.checkpoint_every = 200
+    config.train.num_steps = 3000
+    config.train.checkpoint_every = 500
+    config.train.eval_every = 500
     config.train.init_from = 'runs/feat3dnet_small_pretrain'
   return config

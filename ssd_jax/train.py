@@ -28,6 +28,7 @@ from ssd_jax.data import pipeline
 
 
 AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
+PROBE_BATCHES = 4   # the triplet objective's fixed probe: this many batches of triplets
 
 
 class ConfigError(ValueError):
@@ -65,6 +66,8 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'objective must be one of {tuple(objective.OBJECTIVES)}, got {config.objective!r}')
   bad = set(m.augmentations) - set(AUGMENTATIONS)
   require(not bad, f'model.augmentations: unknown {sorted(bad)}; choose from {AUGMENTATIONS}')
+  require(d.triplet_axes in pipeline.TRIPLET_AXES,
+          f'data.triplet_axes must be one of {pipeline.TRIPLET_AXES}, got {d.triplet_axes!r}')
   require(m.margin >= 0, f'model.margin must be >= 0, got {m.margin}')
   require(not (m.attention_in_cf and not m.use_orientation),
           'model.attention_in_cf needs model.use_orientation (the detector predicts attention)')
@@ -146,12 +149,15 @@ def train_step(state: TrainState, points: jax.Array, *, model: network.FeatureNe
 
 
 def eval_step(state: TrainState, points: jax.Array, key: jax.Array, *, model: network.FeatureNet,
-              config: ml_collections.ConfigDict) -> dict[str, jax.Array]:
-  """Loss and CF rotation error on held-out clouds with running BatchNorm statistics."""
+              config: ml_collections.ConfigDict,
+              objective_name: str = 'self_supervised') -> dict[str, jax.Array]:
+  """Metrics of `objective_name` with running BatchNorm statistics: the loss and CF
+  rotation error of held-out clouds [B, N, 3], or the triplet loss of fixed triplets
+  [B, 3, N, 3]."""
   variables = {'params': state.params, 'batch_stats': state.batch_stats}
-  valid = jnp.ones(points.shape[:2], bool)
-  _, (metrics, _) = objective.self_supervised_loss(model, variables, key, points, valid,
-                                                   config.model, train=False)
+  valid = jnp.ones(points.shape[:-1], bool)
+  _, (metrics, _) = objective.OBJECTIVES[objective_name](model, variables, key, points, valid,
+                                                         config.model, train=False)
   return metrics
 
 
@@ -274,7 +280,8 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
   data_kwargs = dict(fmt=config.data.format, crop_radius=config.data.crop_radius,
                      min_points=config.data.min_points)
   if config.objective == 'triplet':
-    dataset = pipeline.TripletDataset(config.data.path, **data_kwargs)
+    dataset = pipeline.TripletDataset(config.data.path, axes=config.data.triplet_axes,
+                                      **data_kwargs)
   else:
     dataset = pipeline.CloudDataset.from_source(config.data.path, **data_kwargs)
   eval_points = None
@@ -300,6 +307,25 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
   step_fn = jit_train_step(config, mesh)
   eval_fn = jax.jit(lambda s, p, k: eval_step(s, p, k, model=create_model(config), config=config))
   eval_key = jax.random.key(config.seed + 2)
+  # The triplet loss of a random batch is too noisy to read a trend from; the same
+  # triplets, augmentations and centers at every evaluation are not.
+  probe_points, probe_fn = None, None
+  if config.objective == 'triplet':
+    probe_points = dataset.batch(config.seed + 1, 0, t_cfg.batch_size * PROBE_BATCHES,
+                                 config.data.num_points)
+    probe_fn = jax.jit(lambda s, p, k: eval_step(s, p, k, model=create_model(config),
+                                                 config=config, objective_name='triplet'))
+
+  def evaluate(state) -> dict[str, float]:
+    record = {}
+    for prefix, fn, pts in (('eval', eval_fn, eval_points), ('probe', probe_fn, probe_points)):
+      if pts is not None:
+        ev = jax.device_get(fn(state, jnp.asarray(pts), eval_key))
+        record.update({f'{prefix}_{k}': float(v) for k, v in ev.items()})
+    return record
+
+  if start == 0 and (eval_points is not None or probe_points is not None):
+    writer.write({'step': 0, **evaluate(state)})   # the untrained baseline of each curve
 
   make_batch = lambda step: dataset.batch(config.seed, step, t_cfg.batch_size,
                                           config.data.num_points)
@@ -322,9 +348,8 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
           now = time.perf_counter()
           record = {'step': step + 1, **_mean_metrics([m for _, m in pending]),
                     'steps_per_sec': steps_since / (now - t_last)}
-          if eval_points is not None and ((step + 1) % t_cfg.eval_every == 0 or done):
-            ev = jax.device_get(eval_fn(state, jnp.asarray(eval_points), eval_key))
-            record.update({f'eval_{k}': float(v) for k, v in ev.items()})
+          if (step + 1) % t_cfg.eval_every == 0 or done:
+            record.update(evaluate(state))
           writer.write(record)
           shown = {'loss': f"{record['loss']:.4f}"}
           if 'rotation_error_deg' in record:

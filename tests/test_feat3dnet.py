@@ -1,6 +1,8 @@
 """The weakly supervised 3DFeat-Net baseline: triplet loss, triplet data, stage hand-over,
 the self-supervised detector and keypoint repeatability."""
 
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -48,6 +50,37 @@ def test_triplet_dataset_draws_valid_triplets(synthetic_root):
     pipeline.TripletDataset(synthetic_root / 'test_kitti' / '00')
 
 
+def test_triplet_clouds_share_their_scene_axes(synthetic_root):
+  """Anchor and positive, rotated into scene axes, differ by their sensors' offset
+  only; as stored (sensor frames) they also differ by the heading change."""
+  from scipy import spatial  # pylint: disable=g-import-not-at-top
+  from ssd_jax.data import kitti  # pylint: disable=g-import-not-at-top
+  scene = pipeline.TripletDataset(synthetic_root / 'train', crop_radius=0)
+  stored = pipeline.TripletDataset(synthetic_root / 'train', axes='stored', crop_radius=0)
+  position = lambda f: kitti.read_poses(f.parent / 'poses.txt')[int(f.stem), :3, 3]
+  gaps = {}
+  for name, data in (('scene', scene), ('stored', stored)):
+    a = int(data.anchors[0])
+    p = int(data.positives[a][0])
+    files = data.clouds.files
+    cloud_a = data.clouds.cloud(a) + position(files[a])
+    cloud_p = data.clouds.cloud(p) + position(files[p])
+    gaps[name] = np.median(spatial.cKDTree(cloud_p).query(cloud_a)[0])
+  assert gaps['scene'] < 0.25 < gaps['stored'], gaps    # voxel 0.2 m vs. metres apart
+  with pytest.raises(pipeline.CloudDataError, match='axes must be one of'):
+    pipeline.TripletDataset(synthetic_root / 'train', axes='world')
+
+
+def test_scene_axes_need_frame_numbered_files(synthetic_root, tmp_path):
+  folder = tmp_path / '00'
+  folder.mkdir()
+  (folder / 'poses.txt').write_text((synthetic_root / 'train' / '00' / 'poses.txt').read_text())
+  (folder / 'scan_a.bin').write_bytes((synthetic_root / 'train' / '00' / '000000.bin').read_bytes())
+  with pytest.raises(pipeline.CloudDataError, match='named by its frame number'):
+    pipeline.scene_rotations([folder / 'scan_a.bin'])
+  assert pipeline.scene_rotations([synthetic_root / 'clusters' / 'does_not_matter.bin']) == [None]
+
+
 def _triplet_config(tiny_config, root, stage):
   config = tiny_config
   config.objective = 'triplet'
@@ -63,6 +96,18 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
   pre.train.num_steps = 2
   pre_state = train.train_and_evaluate(pre, str(tmp_path / 'pre'))
   assert 'detector' not in pre_state.params     # stage 1 has no detector
+  with open(tmp_path / 'pre' / 'metrics.jsonl') as f:
+    records = [json.loads(line) for line in f]
+  probes = {r['step']: r['probe_loss'] for r in records if 'probe_loss' in r}
+  assert sorted(probes) == [0, 2]
+  # Step 0's probe is the untrained state's triplet loss on the fixed probe triplets.
+  data = pipeline.TripletDataset(pre.data.path, min_points=pre.data.min_points)
+  probe = data.batch(pre.seed + 1, 0, pre.train.batch_size * train.PROBE_BATCHES,
+                     pre.data.num_points)
+  untrained = train.create_train_state(pre, jax.random.key(pre.seed))
+  expected = train.eval_step(untrained, jnp.asarray(probe), jax.random.key(pre.seed + 2),
+                             model=train.create_model(pre), config=pre, objective_name='triplet')
+  assert probes[0] == pytest.approx(float(expected['loss']), rel=1e-5)
   full = _triplet_config(tiny_config.copy_and_resolve_references(), synthetic_root, 'full')
   fresh = train.create_train_state(full, jax.random.key(full.seed))
   handed = train.initialize_from(jax.device_get(fresh), str(tmp_path / 'pre'), full)
@@ -85,11 +130,14 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
     (dict(objective='contrastive'), 'objective must be one of'),
     (dict(augmentations=('jitter', 'flip')), "model.augmentations: unknown \\['flip'\\]"),
     (dict(attention_in_cf=True, use_orientation=False), 'attention_in_cf needs'),
+    (dict(triplet_axes='world'), 'data.triplet_axes must be one of'),
 ])
 def test_baseline_config_errors(tiny_config, override, message):
   for key, value in override.items():
     if key == 'objective':
       tiny_config.objective = value
+    elif key == 'triplet_axes':
+      tiny_config.data.triplet_axes = value
     else:
       tiny_config.model[key] = value
   with pytest.raises(train.ConfigError, match=message):

@@ -74,13 +74,16 @@ class CloudDataset:
     crop_radius: metres, <= 0 to keep everything.
     min_points: clouds with fewer points after cropping are an error.
     cache_size: clouds kept in memory.
+    rotations: optional [3, 3] per file (None entries: as stored), applied on load.
   """
 
   def __init__(self, files: Sequence[os.PathLike], fmt: str = 'auto', crop_radius: float = 20.0,
-               min_points: int = 1, cache_size: int = 512):
+               min_points: int = 1, cache_size: int = 512,
+               rotations: Sequence[np.ndarray | None] | None = None):
     if not files:
       raise CloudDataError('the dataset has no files')
     self.files = [Path(f) for f in files]
+    self.rotations = list(rotations) if rotations is not None else [None] * len(self.files)
     self.fmt, self.crop_radius, self.min_points = fmt, crop_radius, min_points
     self._load = functools.lru_cache(maxsize=cache_size)(self._load_uncached)
 
@@ -94,7 +97,10 @@ class CloudDataset:
 
   def _load_uncached(self, i: int) -> np.ndarray:
     path = self.files[i]
-    pts = crop(clean_cloud(io.read_cloud(path, self.fmt), str(path)), self.crop_radius)
+    pts = clean_cloud(io.read_cloud(path, self.fmt), str(path))
+    if self.rotations[i] is not None:
+      pts = pts @ np.asarray(self.rotations[i], np.float32).T
+    pts = crop(pts, self.crop_radius)
     if len(pts) < max(self.min_points, 1):
       raise CloudDataError(
           f'{path}: {len(pts)} points within {self.crop_radius} m of the origin, fewer than '
@@ -121,6 +127,36 @@ class CloudDataset:
     return out
 
 
+TRIPLET_AXES = ('scene', 'stored')
+
+
+def scene_rotations(files: Sequence[os.PathLike]) -> list[np.ndarray | None]:
+  """The sensor -> scene rotation [3, 3] of each file that sits beside a `poses.txt`
+  (KITTI-style, one row per frame, the frame number being the file's stem), else None.
+
+  3DFeat-Net's Oxford training clouds are stored aligned to the map's axes (ENU);
+  sensor-frame clouds with poses (the synthetic training set, KITTI) are rotated
+  into their scene's axes to match, so that a positive differs from its anchor by
+  a shift, not by the heading difference (opposite-lane passes are ~180 deg).
+  """
+  from ssd_jax.data import kitti  # pylint: disable=g-import-not-at-top
+  poses: dict[Path, np.ndarray] = {}
+  out: list[np.ndarray | None] = []
+  for f in map(Path, files):
+    pose_file = f.parent / 'poses.txt'
+    if not pose_file.is_file():
+      out.append(None)
+      continue
+    if pose_file not in poses:
+      poses[pose_file] = kitti.read_poses(pose_file)
+    if not f.stem.isdigit() or int(f.stem) >= len(poses[pose_file]):
+      raise CloudDataError(f'{f}: beside {pose_file} ({len(poses[pose_file])} poses), a '
+                           'cloud must be named by its frame number (000123.bin); use '
+                           "data.triplet_axes='stored' to keep the clouds as stored")
+    out.append(poses[pose_file][int(f.stem), :3, :3])
+  return out
+
+
 class TripletDataset:
   """3DFeat-Net's training triplets from an Oxford `train.txt` (REFERENCE §3).
 
@@ -128,9 +164,14 @@ class TripletDataset:
   `positives`, its negative from the clouds that are neither positive, non-negative
   nor the anchor itself. Clouds load through a `CloudDataset` (cleaned, cropped,
   cached). `source`: the index file or a directory holding `train.txt`.
+  `axes`: 'scene' rotates clouds that have poses into their scene's axes (see
+  `scene_rotations`; Oxford's clouds have none and are already so), 'stored' keeps
+  every cloud as stored.
   """
 
-  def __init__(self, source: str | os.PathLike, **kwargs):
+  def __init__(self, source: str | os.PathLike, axes: str = 'scene', **kwargs):
+    if axes not in TRIPLET_AXES:
+      raise CloudDataError(f'axes must be one of {TRIPLET_AXES}, got {axes!r}')
     source = Path(source)
     index = source / 'train.txt' if source.is_dir() else source
     if not index.is_file():
@@ -138,7 +179,9 @@ class TripletDataset:
                            'positives | non-negatives); none found')
     entries = io.read_oxford_index(index)
     n = len(entries)
-    self.clouds = CloudDataset([e.path for e in entries], **kwargs)
+    files = [e.path for e in entries]
+    rotations = scene_rotations(files) if axes == 'scene' else None
+    self.clouds = CloudDataset(files, rotations=rotations, **kwargs)
     self.positives = [np.asarray(e.positives, np.int64) for e in entries]
     self.negatives = []
     for i, e in enumerate(entries):
