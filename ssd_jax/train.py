@@ -264,6 +264,20 @@ def initialize_from(state: TrainState, source: str,
                        opt_state=create_optimizer(config).init(params))
 
 
+def triplet_dataset(config: ml_collections.ConfigDict) -> pipeline.TripletDataset:
+  """The triplets of `config.data`."""
+  return pipeline.TripletDataset(config.data.path, axes=config.data.triplet_axes,
+                                 fmt=config.data.format, crop_radius=config.data.crop_radius,
+                                 min_points=config.data.min_points)
+
+
+def probe_triplets(dataset: pipeline.TripletDataset,
+                   config: ml_collections.ConfigDict) -> np.ndarray:
+  """The triplet objective's fixed probe: [batch_size * PROBE_BATCHES, 3, N, 3] metres."""
+  return dataset.batch(config.seed + 1, 0, config.train.batch_size * PROBE_BATCHES,
+                       config.data.num_points)
+
+
 def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> TrainState:
   """Train (or resume) `config` in `workdir`; returns the final state.
 
@@ -280,15 +294,12 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
   data_kwargs = dict(fmt=config.data.format, crop_radius=config.data.crop_radius,
                      min_points=config.data.min_points)
   if config.objective == 'triplet':
-    dataset = pipeline.TripletDataset(config.data.path, axes=config.data.triplet_axes,
-                                      **data_kwargs)
+    dataset = triplet_dataset(config)
   else:
     dataset = pipeline.CloudDataset.from_source(config.data.path, **data_kwargs)
   eval_points = None
   if config.data.eval_path:
-    eval_set = pipeline.CloudDataset.from_source(
-        config.data.eval_path, fmt=config.data.format, crop_radius=config.data.crop_radius,
-        min_points=config.data.min_points)
+    eval_set = pipeline.CloudDataset.from_source(config.data.eval_path, **data_kwargs)
     eval_points = eval_set.batch(config.seed + 1, 0, t_cfg.batch_size, config.data.num_points)
 
   mesh = make_mesh()
@@ -311,8 +322,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
   # triplets, augmentations and centers at every evaluation are not.
   probe_points, probe_fn = None, None
   if config.objective == 'triplet':
-    probe_points = dataset.batch(config.seed + 1, 0, t_cfg.batch_size * PROBE_BATCHES,
-                                 config.data.num_points)
+    probe_points = probe_triplets(dataset, config)
     probe_fn = jax.jit(lambda s, p, k: eval_step(s, p, k, model=create_model(config),
                                                  config=config, objective_name='triplet'))
 

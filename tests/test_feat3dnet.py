@@ -2,15 +2,20 @@
 the self-supervised detector and keypoint repeatability."""
 
 import json
+import os
+import subprocess
+import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ssd_jax import geometry, objective, train
+from ssd_jax import geometry, inference, objective, train
 from ssd_jax.data import pipeline
-from ssd_jax.evaluation import repeatability
+from ssd_jax.evaluation import repeatability, triplets
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def test_attention_weighted_triplet_by_hand():
@@ -108,6 +113,10 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
   expected = train.eval_step(untrained, jnp.asarray(probe), jax.random.key(pre.seed + 2),
                              model=train.create_model(pre), config=pre, objective_name='triplet')
   assert probes[0] == pytest.approx(float(expected['loss']), rel=1e-5)
+  # The diagnostics read the checkpoint back and measure the same probe the trainer logged.
+  stored = triplets.checkpoint_probe(inference.load(tmp_path / 'pre'), pre, probe,
+                                     ('jitter', 'rotate_small', 'shift'))
+  assert stored['loss'] == pytest.approx(probes[2], rel=1e-5)
   full = _triplet_config(tiny_config.copy_and_resolve_references(), synthetic_root, 'full')
   fresh = train.create_train_state(full, jax.random.key(full.seed))
   handed = train.initialize_from(jax.device_get(fresh), str(tmp_path / 'pre'), full)
@@ -171,3 +180,25 @@ def test_keypoint_repeatability_by_hand():
   assert repeatability.keypoint_repeatability(kp1, kp2, t12) == pytest.approx(0.5)
   assert repeatability.keypoint_repeatability(kp1, kp2[:0], t12) == 0.0
   assert np.isnan(repeatability.keypoint_repeatability(kp1[:0], kp2, t12))
+
+
+def test_fpfh_probe_finds_an_identical_positive(synthetic_root):
+  """FPFH on (A, A, B): every anchor cluster's best positive match is itself (accuracy 1);
+  on (A, B, A) the negative is the copy (accuracy 0)."""
+  data = pipeline.TripletDataset(synthetic_root / 'train')
+  a, b = (pipeline.subsample(np.random.default_rng(i), data.clouds.cloud(i), 512)
+          for i in (0, len(data.clouds) - 1))
+  same_positive = triplets.fpfh_probe(np.stack([np.stack([a, a, b])]), 32, fpfh_max_nn=50)
+  same_negative = triplets.fpfh_probe(np.stack([np.stack([a, b, a])]), 32, fpfh_max_nn=50)
+  assert same_positive['triplet_accuracy'] == 1.0 and same_negative['triplet_accuracy'] == 0.0
+  assert same_positive['positive_distance'] < 1e-3 < same_positive['negative_distance']
+
+
+def test_triplet_diagnostics_cli_names_a_missing_checkpoint(synthetic_root, tmp_path):
+  run = subprocess.run([sys.executable, '-m', 'experiments.triplet_diagnostics',
+                        '--config=configs/3dfeatnet_small.py:pretrain',
+                        f'--config.data.path={synthetic_root / "train"}',
+                        f'--workdir={tmp_path / "none"}'],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300)
+  assert run.returncode != 0 and 'Traceback' not in run.stderr
+  assert 'error:' in run.stderr and 'no such checkpoint directory' in run.stderr

@@ -1,0 +1,64 @@
+r"""What a triplet-trained checkpoint learned, and what its triplets offer at all.
+
+    python -m experiments.triplet_diagnostics --config=configs/3dfeatnet_small.py:pretrain \
+        --workdir=runs/feat3dnet_small_pretrain
+
+On the trainer's fixed probe triplets (see `train.probe_triplets`), prints a Markdown
+table: the untrained network and the checkpoint with the clouds as stored and with
+every cloud turned by its own random angle (Rotate1D), and FPFH (rotation invariant)
+as the reference point. `--config` is the run's training config.
+"""
+
+from absl import app
+from absl import flags
+import jax
+from ml_collections import config_flags
+
+from ssd_jax import inference, train
+from ssd_jax.evaluation import triplets
+from ssd_jax.logging_utils import quiet_libraries
+
+FLAGS = flags.FLAGS
+flags.DEFINE_string('workdir', None, 'Workdir of the triplet-trained run.')
+flags.DEFINE_bool('fpfh', True, 'Also measure FPFH on the probe triplets (~1 s per triplet).')
+config_flags.DEFINE_config_file('config', None, 'The run\'s training config.')
+flags.mark_flags_as_required(['workdir', 'config'])
+
+STORED = ('jitter', 'rotate_small', 'shift')
+ROTATED = STORED + ('rotate_1d',)
+
+
+def main(argv):
+  if len(argv) > 1:
+    raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
+  quiet_libraries()
+  config = FLAGS.config
+  try:   # a missing checkpoint or train.txt, bad clouds: one line, no traceback
+    train.check_config(config)
+    probe = train.probe_triplets(train.triplet_dataset(config), config)
+    trained = inference.load(FLAGS.workdir)
+    fresh = jax.device_get(train.create_train_state(config, jax.random.key(config.seed)))
+    untrained = inference.Model.from_config(
+        config, {'params': fresh.params, 'batch_stats': fresh.batch_stats})
+    if jax.tree.structure(trained.variables) != jax.tree.structure(untrained.variables):
+      raise ValueError(f'{FLAGS.workdir} holds a different network than --config describes '
+                       '(model.use_orientation, model.descriptor_dim); pass its training config')
+  except (ValueError, FileNotFoundError) as e:
+    raise SystemExit(f'error: {e}') from None
+  rows = []
+  for name, model in (('untrained', untrained), (f'{FLAGS.workdir} (step {trained.step})', trained)):
+    for clouds, augs in (('as stored', STORED), ('each turned at random (Rotate1D)', ROTATED)):
+      rows.append((name, clouds, triplets.checkpoint_probe(model, config, probe, augs)))
+  if FLAGS.fpfh:
+    rows.append(('FPFH (rotation invariant)', 'any',
+                 triplets.fpfh_probe(probe, config.model.num_clusters, config.seed,
+                                     config.model.margin)))
+  print(f'{len(probe)} probe triplets of {config.data.path}, {config.data.num_points} points, '
+        f'{config.model.num_clusters} clusters per cloud\n')
+  print('| descriptor | clouds | triplet loss | accuracy (d_pos < d_neg) |\n|---|---|---|---|')
+  for name, clouds, m in rows:
+    print(f"| {name} | {clouds} | {m['loss']:.4f} | {m['triplet_accuracy']:.3f} |")
+
+
+if __name__ == '__main__':
+  app.run(main)
