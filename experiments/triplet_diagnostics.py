@@ -6,16 +6,19 @@ r"""What a triplet-trained checkpoint learned, and what its triplets offer at al
 On the trainer's fixed probe triplets (see `train.probe_triplets`), prints a Markdown
 table: the untrained network and the checkpoint with the clouds as stored and with
 every cloud turned by its own random angle (Rotate1D), and FPFH (rotation invariant)
-as the reference point. `--config` is the run's training config.
+as the reference point. For a model with a detector it also prints how well the
+predicted orientation turns with the cloud (`evaluation.orientation`). `--config` is
+the run's training config.
 """
 
 from absl import app
 from absl import flags
 import jax
 from ml_collections import config_flags
+import numpy as np
 
 from ssd_jax import inference, train
-from ssd_jax.evaluation import triplets
+from ssd_jax.evaluation import orientation, triplets
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
@@ -26,6 +29,7 @@ flags.mark_flags_as_required(['workdir', 'config'])
 
 STORED = ('jitter', 'rotate_small', 'shift')
 ROTATED = STORED + ('rotate_1d',)
+TURNS = np.radians([45.0, 90.0, 135.0, 180.0])
 
 
 def main(argv):
@@ -58,6 +62,20 @@ def main(argv):
   print('| descriptor | clouds | triplet loss | accuracy (d_pos < d_neg) |\n|---|---|---|---|')
   for name, clouds, m in rows:
     print(f"| {name} | {clouds} | {m['loss']:.4f} | {m['triplet_accuracy']:.3f} |")
+  if config.model.use_orientation:
+    anchors = probe[:, 0]
+    rng = np.random.default_rng(config.seed)
+    centers = [a[rng.choice(len(a), config.model.num_clusters, replace=False)] for a in anchors]
+    print(f'\nOrientation after turning each anchor cloud by {np.degrees(TURNS).astype(int)} deg '
+          f'({len(anchors)} clouds x {config.model.num_clusters} clusters). Error 0: the '
+          'orientation turns with the cloud; error = the turn (median 112.5 deg): it ignores '
+          'the turn; median 90 deg: unrelated\n')
+    print('| detector | median error (deg) | share within 15 deg |\n|---|---|---|')
+    for name, model in (('untrained', untrained), (f'{FLAGS.workdir} (step {trained.step})', trained)):
+      errors = np.concatenate([orientation.orientation_errors(model, a, c, TURNS)
+                               for a, c in zip(anchors, centers)], axis=1)
+      o = orientation.summarize(errors)
+      print(f"| {name} | {o['median_deg']:.1f} | {o['within']:.3f} |")
 
 
 if __name__ == '__main__':

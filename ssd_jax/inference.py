@@ -218,13 +218,22 @@ def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, c
   return np.concatenate(out) if out else np.zeros((0, model.net.descriptor_dim), np.float32)
 
 
+def detect_at(model: Model, points: np.ndarray, centers: np.ndarray, search: str = 'kdtree',
+              chunk: int = 2048, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+  """The detector at given cluster centers: points [N, 3] metres (the search surface),
+  centers [K, 3] metres -> attention [K] (>= 0) and orientation [K] (radians about z)."""
+  if not model.net.use_orientation:
+    raise ValueError('this model has no detector: it was trained with '
+                     'model.use_orientation=False (3DFeat-Net\'s descriptor pre-training)')
+  points = shuffled(check_cloud(points), seed)
+  parts = _chunks(model, points, check_cloud(centers, 'centers'), 'detect', search, chunk)
+  return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+
+
 def attention(model: Model, points: np.ndarray, search: str = 'kdtree', chunk: int = 2048,
               seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
   """Attention [N] and orientation [N] (radians) with every point as a cluster center."""
-  points = check_cloud(points)
-  order = np.random.default_rng(seed).permutation(len(points))
-  parts = _chunks(model, points[order], points, 'detect', search, chunk)
-  return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+  return detect_at(model, points, points, search, chunk, seed)
 
 
 def non_max_suppression(points: np.ndarray, scores: np.ndarray, radius: float = 0.5,

@@ -1,6 +1,7 @@
 """The weakly supervised 3DFeat-Net baseline: triplet loss, triplet data, stage hand-over,
 the self-supervised detector and keypoint repeatability."""
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -13,7 +14,7 @@ import pytest
 
 from ssd_jax import geometry, inference, objective, train
 from ssd_jax.data import pipeline
-from ssd_jax.evaluation import repeatability, triplets
+from ssd_jax.evaluation import orientation, repeatability, triplets
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -202,3 +203,29 @@ def test_triplet_diagnostics_cli_names_a_missing_checkpoint(synthetic_root, tmp_
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
   assert run.returncode != 0 and 'Traceback' not in run.stderr
   assert 'error:' in run.stderr and 'no such checkpoint directory' in run.stderr
+
+
+def test_orientation_error_wraps_around():
+  theta = np.radians([10.0, 350.0, 0.0])
+  turned = np.radians([100.0, 80.0, 270.0])
+  # after a 90 deg turn: exact; 350 + 90 = 440 = 80 (exact); 0 + 90 vs 270: 180 off
+  np.testing.assert_allclose(orientation.orientation_error_deg(theta, turned, np.pi / 2),
+                             [0.0, 0.0, 180.0], atol=1e-9)
+  assert orientation.summarize(np.array([[0.0, 10.0, 100.0, 170.0]])) == {
+      'median_deg': 55.0, 'within': 0.5}
+
+
+def test_orientation_errors_of_a_detector(tiny_config):
+  state = train.create_train_state(tiny_config, jax.random.key(0))
+  model = inference.Model.from_config(tiny_config, {'params': state.params,
+                                                    'batch_stats': state.batch_stats})
+  rng = np.random.default_rng(0)
+  points = (rng.uniform(-8, 8, (600, 3)) * [1, 1, 0.2]).astype(np.float32)
+  errors = orientation.orientation_errors(model, points, points[:40], [0.0, np.pi / 2])
+  assert errors.shape == (2, 40)
+  assert errors[0].max() < 1e-3                  # no turn: the same clusters, the same angles
+  assert errors[1].mean() > 5.0                  # an untrained detector does not turn along
+  stage1 = dataclasses.replace(model, net=train.create_model(tiny_config).clone(
+      use_orientation=False))
+  with pytest.raises(ValueError, match='has no detector'):
+    inference.detect_at(stage1, points, points[:4])
