@@ -18,8 +18,9 @@ def get_config() -> ml_collections.ConfigDict:
   # descriptors fpfh | a checkpoint name. The paper's Tables I/II and Fig. 4 rows:
   config.rows = ('iss+fpfh', 'iss+feat3dnet', 'iss+ours', 'feat3dnet+fpfh',
                  'feat3dnet+feat3dnet', 'feat3dnet+ours', 'ours_detector+fpfh',
-                 'ours_detector+ours_detector',
-                 'random+fpfh')   # control for the learned detectors: random points, FPFH
+                 'ours_detector+ours_detector')
+  # Control for the learned detectors (not run by default, it doubles the FPFH work):
+  # --config.rows="('random+fpfh',)" on experiments.evaluate_registration.
   # Detectors whose repeatability is measured (0.5 m after the ground-truth alignment).
   config.keypoint_sources = ('iss', 'feat3dnet', 'ours_detector', 'random')
   config.repeatability_radius = 0.5
