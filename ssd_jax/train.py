@@ -196,14 +196,16 @@ class MetricsWriter:
 
   On resume, lines logged after the restored step (by a run that was killed
   before its next checkpoint) are dropped, so the file reads like one
-  uninterrupted run.
+  uninterrupted run. A fresh start (`resume_step` 0) drops them all: its step-0
+  line is written again.
   """
 
   def __init__(self, path: str, resume_step: int):
     self.path = path
     if os.path.exists(path):
       with open(path) as f:
-        kept = [line for line in f if line.strip() and json.loads(line)['step'] <= resume_step]
+        kept = [line for line in f if line.strip() and 0 < resume_step
+                and json.loads(line)['step'] <= resume_step]
       with open(path, 'w') as f:
         f.writelines(kept)
 

@@ -237,3 +237,14 @@ def test_resuming_with_a_different_model_is_refused(tiny_config, tmp_path):
   tiny_config.train.num_steps = 4
   with pytest.raises(train.ConfigError, match='model.descriptor_dim=32, but the config says 64'):
     train.train_and_evaluate(tiny_config, str(tmp_path))
+
+
+def test_metrics_writer_keeps_what_the_checkpoint_covers(tmp_path):
+  path = str(tmp_path / 'metrics.jsonl')
+  lines = ''.join(json.dumps({'step': s, 'loss': 1.0}) + '\n' for s in (0, 20, 40, 60))
+  with open(path, 'w') as f:
+    f.write(lines)
+  train.MetricsWriter(path, 40)     # resumed from step 40: the step-60 line was never saved
+  assert [json.loads(l)['step'] for l in open(path)] == [0, 20, 40]
+  train.MetricsWriter(path, 0)      # no checkpoint yet: the run starts over, step 0 included
+  assert open(path).read() == ''

@@ -18,6 +18,7 @@ from absl import logging
 import numpy as np
 
 from ssd_jax.data import io
+from ssd_jax.data import kitti
 
 
 class CloudDataError(ValueError):
@@ -139,7 +140,6 @@ def scene_rotations(files: Sequence[os.PathLike]) -> list[np.ndarray | None]:
   into their scene's axes to match, so that a positive differs from its anchor by
   a shift, not by the heading difference (opposite-lane passes are ~180 deg).
   """
-  from ssd_jax.data import kitti  # pylint: disable=g-import-not-at-top
   poses: dict[Path, np.ndarray] = {}
   out: list[np.ndarray | None] = []
   for f in map(Path, files):
