@@ -49,8 +49,9 @@ def main(argv):
                        '(model.use_orientation, model.descriptor_dim); pass its training config')
   except (ValueError, FileNotFoundError) as e:
     raise SystemExit(f'error: {e}') from None
+  models = (('untrained', untrained), (f'{FLAGS.workdir} (step {trained.step})', trained))
   rows = []
-  for name, model in (('untrained', untrained), (f'{FLAGS.workdir} (step {trained.step})', trained)):
+  for name, model in models:
     for clouds, augs in (('as stored', STORED), ('each turned at random (Rotate1D)', ROTATED)):
       rows.append((name, clouds, triplets.checkpoint_probe(model, config, probe, augs)))
   if FLAGS.fpfh:
@@ -71,7 +72,7 @@ def main(argv):
           'orientation turns with the cloud; error = the turn (median 112.5 deg): it ignores '
           'the turn; median 90 deg: unrelated\n')
     print('| detector | median error (deg) | share within 15 deg |\n|---|---|---|')
-    for name, model in (('untrained', untrained), (f'{FLAGS.workdir} (step {trained.step})', trained)):
+    for name, model in models:
       errors = np.concatenate([orientation.orientation_errors(model, a, c, TURNS)
                                for a, c in zip(anchors, centers)], axis=1)
       o = orientation.summarize(errors)

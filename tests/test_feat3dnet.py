@@ -229,3 +229,31 @@ def test_orientation_errors_of_a_detector(tiny_config):
       use_orientation=False))
   with pytest.raises(ValueError, match='has no detector'):
     inference.detect_at(stage1, points, points[:4])
+
+
+def test_reference_augmentations_act_per_cloud():
+  """RotateSmall, Shift and Rotate1D: one rigid motion per cloud, within the reference's
+  bounds, different between the clouds of a batch."""
+  from ssd_jax import augment  # pylint: disable=g-import-not-at-top
+  pts = jnp.asarray(np.random.default_rng(0).uniform(-10, 10, (4, 200, 3)), jnp.float32)
+  key = jax.random.key(3)
+
+  def fitted_rotation(a, b):   # least squares b = a @ M (exact for a pure linear map)
+    return np.linalg.lstsq(np.asarray(a, np.float64), np.asarray(b, np.float64), rcond=None)[0]
+
+  small = augment.rotate_small(key, pts)
+  one_d = augment.rotate_1d(key, pts)
+  angles = []
+  for c in range(4):
+    m = fitted_rotation(pts[c], small[c])
+    np.testing.assert_allclose(m.T @ m, np.eye(3), atol=1e-4)     # a rotation, no scaling
+    # three angles each clipped to 0.18 rad: the total turn stays below sqrt(3) * 0.18
+    assert np.degrees(np.arccos(np.clip((np.trace(m) - 1) / 2, -1, 1))) < np.degrees(0.32)
+    r = fitted_rotation(pts[c], one_d[c])
+    np.testing.assert_allclose(r[:, 2], [0, 0, 1], atol=1e-4)     # about z only
+    angles.append(np.arctan2(r[0, 1], r[0, 0]))
+  assert len(np.unique(np.round(angles, 3))) == 4                  # a draw per cloud
+  moved = np.asarray(augment.shift(key, pts) - pts)
+  assert np.abs(moved).max() <= 0.1 + 1e-6
+  np.testing.assert_allclose(moved, np.broadcast_to(moved[:, :1], moved.shape), atol=1e-5)
+  assert not np.allclose(moved[0, 0], moved[1, 0])
