@@ -30,6 +30,7 @@ def get_config() -> ml_collections.ConfigDict:
   data.min_points = 64       # fewer after cropping is an error
   data.prefetch = 4          # batches prepared ahead of the jitted step
   data.triplet_axes = 'scene'  # triplet objective: rotate clouds with poses.txt to scene axes
+  data.triplet_positives = 'index'  # or 'self': each cloud its own positive (a control)
 
   config.model = model = ml_collections.ConfigDict()
   model.descriptor_dim = 32      # D in {16, 32, 64, 128}

@@ -56,6 +56,24 @@ def test_triplet_dataset_draws_valid_triplets(synthetic_root):
     pipeline.TripletDataset(synthetic_root / 'test_kitti' / '00')
 
 
+def test_self_positives_control(synthetic_root):
+  """positives='self': each cloud's positive is the same scan, subsampled afresh;
+  the negatives stay those of the index."""
+  indexed = pipeline.TripletDataset(synthetic_root / 'train')
+  control = pipeline.TripletDataset(synthetic_root / 'train', positives='self')
+  assert [p.tolist() for p in control.positives] == [[i] for i in range(len(control.positives))]
+  for a in indexed.anchors:
+    np.testing.assert_array_equal(control.negatives[a], indexed.negatives[a])
+  anchor, positive, negative = control.batch(0, 0, 1, 512)[0]
+  scans = ({tuple(p) for p in control.clouds.cloud(int(i)).round(4)} for i in control.anchors)
+  scan = next(s for s in scans if tuple(anchor[0].round(4)) in s)
+  assert all(tuple(p) in scan for p in positive.round(4))   # drawn from the anchor's scan
+  assert not np.array_equal(np.sort(anchor, 0), np.sort(positive, 0))   # a different draw
+  assert not any(tuple(p) in scan for p in negative.round(4)[:20])
+  with pytest.raises(pipeline.CloudDataError, match='positives must be one of'):
+    pipeline.TripletDataset(synthetic_root / 'train', positives='nearest')
+
+
 def test_triplet_clouds_share_their_scene_axes(synthetic_root):
   """Anchor and positive, rotated into scene axes, differ by their sensors' offset
   only; as stored (sensor frames) they also differ by the heading change."""
@@ -111,9 +129,19 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
   probe = data.batch(pre.seed + 1, 0, pre.train.batch_size * train.PROBE_BATCHES,
                      pre.data.num_points)
   untrained = train.create_train_state(pre, jax.random.key(pre.seed))
-  expected = train.eval_step(untrained, jnp.asarray(probe), jax.random.key(pre.seed + 2),
-                             model=train.create_model(pre), config=pre, objective_name='triplet')
+  model = train.create_model(pre)
+  expected = train.probe_step(untrained, jnp.asarray(probe), jax.random.key(pre.seed + 2),
+                              model=model, config=pre)
   assert probes[0] == pytest.approx(float(expected['loss']), rel=1e-5)
+  # ... the mean over its batches, each with its own draw of augmentations and centres.
+  b = pre.train.batch_size
+  keys = jax.random.split(jax.random.key(pre.seed + 2), train.PROBE_BATCHES)
+  one_batch = jax.jit(lambda p, k: train.eval_step(untrained, p, k, model=model, config=pre,
+                                                   objective_name='triplet')['loss'])
+  per_batch = [float(one_batch(jnp.asarray(probe[i * b:(i + 1) * b]), keys[i]))
+               for i in range(train.PROBE_BATCHES)]
+  assert probes[0] == pytest.approx(np.mean(per_batch), rel=1e-4)
+  assert np.std(per_batch) > 1e-3   # the draws differ
   # The diagnostics read the checkpoint back and measure the same probe the trainer logged.
   stored = triplets.checkpoint_probe(inference.load(tmp_path / 'pre'), pre, probe,
                                      ('jitter', 'rotate_small', 'shift'))
@@ -141,13 +169,14 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
     (dict(augmentations=('jitter', 'flip')), "model.augmentations: unknown \\['flip'\\]"),
     (dict(attention_in_cf=True, use_orientation=False), 'attention_in_cf needs'),
     (dict(triplet_axes='world'), 'data.triplet_axes must be one of'),
+    (dict(triplet_positives='nearest'), 'data.triplet_positives must be one of'),
 ])
 def test_baseline_config_errors(tiny_config, override, message):
   for key, value in override.items():
     if key == 'objective':
       tiny_config.objective = value
-    elif key == 'triplet_axes':
-      tiny_config.data.triplet_axes = value
+    elif key.startswith('triplet_'):
+      tiny_config.data[key] = value
     else:
       tiny_config.model[key] = value
   with pytest.raises(train.ConfigError, match=message):

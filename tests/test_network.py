@@ -1,6 +1,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 import pytest
 
 from ssd_jax import geometry, grouping, network
@@ -86,3 +87,59 @@ def test_running_statistics_are_updated_in_training_only():
   assert float(jnp.max(jnp.abs(after))) > 0
   d_eval, _, _ = model.apply({'params': variables['params'], **mutated}, clusters, train=False)
   assert bool(jnp.isfinite(d_eval).all())
+
+
+def _oriented_clusters(rng, n):
+  """[n, 32, 3] unit-ball clusters with a heading: a wall segment along x and a blob off
+  to one side (no 180° symmetry), each turned by its own random angle."""
+  wall = rng.uniform(-1, 1, (n, 32, 3)) * np.array([1.0, 0.15, 0.5])
+  blob = rng.normal(0, 0.15, (n, 1, 3)) + np.array([0.5, 0.5, 0.0]) + rng.normal(0, 0.1, (n, 32, 3))
+  points = np.where(rng.random((n, 32, 1)) < 0.3, blob, wall)
+  return grouping.rotate_clusters(jnp.asarray(points, jnp.float32),
+                                  jnp.asarray(rng.uniform(0, 2 * np.pi, n), jnp.float32))
+
+
+def test_detector_can_learn_to_turn_with_the_cluster():
+  """The orientation head (atan2 of a learned 2-vector) can learn equivariance: supervised directly on theta(turned by phi) - theta = phi, the held-out
+  error falls from chance (median ~90°) to well below it in a few hundred steps."""
+  rng = np.random.default_rng(0)
+  train_clusters, held_out = _oriented_clusters(rng, 1024), _oriented_clusters(rng, 256)
+  detector = network.Detector()
+  variables = detector.init(jax.random.key(0), train_clusters[:8], True)
+  opt = optax.adam(1e-3)
+
+  def turn_error(params, batch_stats, clusters, phi, train):
+    turned = jnp.einsum('kji,kci->kcj', geometry.rotation_z(phi), clusters)  # Rz(phi) x
+    both = jnp.concatenate([clusters, turned])
+    (_, theta), new = detector.apply({'params': params, 'batch_stats': batch_stats}, both,
+                                     train, mutable=['batch_stats'])
+    before, after = jnp.split(theta, 2)
+    return after - before - phi, new['batch_stats']
+
+  @jax.jit
+  def step(params, batch_stats, opt_state, key):
+    k_idx, k_phi = jax.random.split(key)
+    idx = jax.random.choice(k_idx, len(train_clusters), (64,), replace=False)
+    phi = jax.random.uniform(k_phi, (64,), maxval=2 * jnp.pi)
+
+    def loss(p):
+      d, new_stats = turn_error(p, batch_stats, train_clusters[idx], phi, True)
+      return jnp.mean(1 - jnp.cos(d)), new_stats
+    (_, new_stats), grads = jax.value_and_grad(loss, has_aux=True)(params)
+    updates, opt_state = opt.update(grads, opt_state, params)
+    return optax.apply_updates(params, updates), new_stats, opt_state
+
+  def median_error_deg(params, batch_stats):
+    phi = jnp.asarray(np.random.default_rng(1).uniform(0, 2 * np.pi, len(held_out)), jnp.float32)
+    d, _ = turn_error(params, batch_stats, held_out, phi, False)
+    return float(np.degrees(np.median(np.abs(np.angle(np.exp(1j * np.asarray(d)))))))
+
+  params, batch_stats = variables['params'], variables['batch_stats']
+  opt_state = opt.init(params)
+  before = median_error_deg(params, batch_stats)
+  for i in range(300):
+    params, batch_stats, opt_state = step(params, batch_stats, opt_state,
+                                          jax.random.fold_in(jax.random.key(1), i))
+  after = median_error_deg(params, batch_stats)
+  assert before > 60, before
+  assert after < 35, (before, after)

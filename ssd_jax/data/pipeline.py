@@ -129,6 +129,7 @@ class CloudDataset:
 
 
 TRIPLET_AXES = ('scene', 'stored')
+TRIPLET_POSITIVES = ('index', 'self')
 
 
 def scene_rotations(files: Sequence[os.PathLike]) -> list[np.ndarray | None]:
@@ -166,12 +167,18 @@ class TripletDataset:
   cached). `source`: the index file or a directory holding `train.txt`.
   `axes`: 'scene' rotates clouds that have poses into their scene's axes (see
   `scene_rotations`; Oxford's clouds have none and are already so), 'stored' keeps
-  every cloud as stored.
+  every cloud as stored. `positives`: 'index' takes them from the index; 'self' is a
+  control that makes each cloud its own only positive (an independent subsample,
+  augmentations and centres of the same scan), the most a positive can share with
+  its anchor; negatives stay as indexed.
   """
 
-  def __init__(self, source: str | os.PathLike, axes: str = 'scene', **kwargs):
+  def __init__(self, source: str | os.PathLike, axes: str = 'scene', positives: str = 'index',
+               **kwargs):
     if axes not in TRIPLET_AXES:
       raise CloudDataError(f'axes must be one of {TRIPLET_AXES}, got {axes!r}')
+    if positives not in TRIPLET_POSITIVES:
+      raise CloudDataError(f'positives must be one of {TRIPLET_POSITIVES}, got {positives!r}')
     source = Path(source)
     index = source / 'train.txt' if source.is_dir() else source
     if not index.is_file():
@@ -182,7 +189,10 @@ class TripletDataset:
     files = [e.path for e in entries]
     rotations = scene_rotations(files) if axes == 'scene' else None
     self.clouds = CloudDataset(files, rotations=rotations, **kwargs)
-    self.positives = [np.asarray(e.positives, np.int64) for e in entries]
+    if positives == 'self':
+      self.positives = [np.array([i], np.int64) for i in range(n)]
+    else:
+      self.positives = [np.asarray(e.positives, np.int64) for e in entries]
     self.negatives = []
     for i, e in enumerate(entries):
       bad = [j for j in (*e.positives, *e.non_negatives) if not 0 <= j < n]

@@ -37,8 +37,8 @@ def checkpoint_probe(model: inference.Model, config: ml_collections.ConfigDict,
   state = train.TrainState(step=jnp.zeros((), jnp.int32), params=model.variables['params'],
                            batch_stats=model.variables['batch_stats'], opt_state=None,
                            rng=None)
-  probe = jax.jit(lambda s, p, k: train.eval_step(s, p, k, model=train.create_model(config),
-                                                  config=config, objective_name='triplet'))
+  probe = jax.jit(lambda s, p, k: train.probe_step(s, p, k, model=train.create_model(config),
+                                                   config=config))
   metrics = probe(state, jnp.asarray(triplets), jax.random.key(config.seed + 2))
   return {k: float(v) for k, v in metrics.items()}
 
