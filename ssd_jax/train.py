@@ -173,6 +173,9 @@ def probe_step(state: TrainState, triplets: jax.Array, key: jax.Array, *,
   size), with running BatchNorm statistics: one batch of B at a time, so the memory is a
   training batch's, and each batch with its own draw of augmentations and centres."""
   b = config.train.batch_size
+  if triplets.shape[0] % b:
+    raise ValueError(f'probe_step: {triplets.shape[0]} triplets is not a multiple of the '
+                     f'training batch size {b}')
   batches = triplets.reshape(-1, b, *triplets.shape[1:])
   keys = jax.random.split(key, batches.shape[0])
   per_batch = jax.lax.map(

@@ -142,6 +142,9 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
                for i in range(train.PROBE_BATCHES)]
   assert probes[0] == pytest.approx(np.mean(per_batch), rel=1e-4)
   assert np.std(per_batch) > 1e-3   # the draws differ
+  with pytest.raises(ValueError, match='not a multiple of the training batch size'):
+    train.probe_step(untrained, jnp.asarray(probe[:b + 1]), jax.random.key(0), model=model,
+                     config=pre)
   # The diagnostics read the checkpoint back and measure the same probe the trainer logged.
   stored = triplets.checkpoint_probe(inference.load(tmp_path / 'pre'), pre, probe,
                                      ('jitter', 'rotate_small', 'shift'))
