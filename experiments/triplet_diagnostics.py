@@ -8,7 +8,8 @@ table: the untrained network and the checkpoint with the clouds as stored and wi
 every cloud turned by its own random angle (Rotate1D), and FPFH (rotation invariant)
 as the reference point. For a model with a detector it also prints how well the
 predicted orientation turns with the cloud (`evaluation.orientation`). `--config` is
-the run's training config.
+the run's training config. Last, how fast the checkpoint's gain fades as the clouds
+turn: its probe with each cloud turned by its own angle within ±10°, ±20°, ... ±180°.
 """
 
 from absl import app
@@ -30,6 +31,7 @@ flags.mark_flags_as_required(['workdir', 'config'])
 STORED = ('jitter', 'rotate_small', 'shift')
 ROTATED = STORED + ('rotate_1d',)
 TURNS = np.radians([45.0, 90.0, 135.0, 180.0])
+TURN_RANGES_DEG = (0, 10, 20, 45, 90, 180)
 
 
 def main(argv):
@@ -77,6 +79,14 @@ def main(argv):
                                for a, c in zip(anchors, centers)], axis=1)
       o = orientation.summarize(errors)
       print(f"| {name} | {o['median_deg']:.1f} | {o['within']:.3f} |")
+  _, checkpoint = models[1]
+  print(f'\n{models[1][0]} with each cloud turned by its own uniform angle within the range '
+        '(±180°: Rotate1D)\n')
+  print('| turns within | triplet loss | accuracy |\n|---|---|---|')
+  for deg in TURN_RANGES_DEG:
+    turned = triplets.turn_clouds(probe, np.radians(deg), config.seed)
+    m = triplets.checkpoint_probe(checkpoint, config, turned, STORED)
+    print(f"| ±{deg}° | {m['loss']:.4f} | {m['triplet_accuracy']:.3f} |")
 
 
 if __name__ == '__main__':

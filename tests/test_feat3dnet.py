@@ -227,6 +227,21 @@ def test_fpfh_probe_finds_an_identical_positive(synthetic_root):
   assert same_positive['positive_distance'] < 1e-3 < same_positive['negative_distance']
 
 
+def test_turn_clouds_turns_each_cloud_about_z_within_range():
+  """Each cloud turns rigidly about z by its own angle within the range; 0 is identity."""
+  pts = np.random.default_rng(0).normal(size=(4, 3, 50, 3)).astype(np.float32)
+  np.testing.assert_allclose(triplets.turn_clouds(pts, 0.0), pts, atol=1e-6)
+  turned = triplets.turn_clouds(pts, np.radians(20.0), seed=1)
+  np.testing.assert_allclose(turned[..., 2], pts[..., 2], atol=1e-6)
+  np.testing.assert_allclose(np.linalg.norm(turned[..., :2], axis=-1),
+                             np.linalg.norm(pts[..., :2], axis=-1), rtol=1e-5)
+  # angle of each cloud from its first point; one angle per cloud, all within +-20 deg
+  ang = np.angle((turned[..., 0] + 1j * turned[..., 1]) / (pts[..., 0] + 1j * pts[..., 1]))
+  np.testing.assert_allclose(ang, np.broadcast_to(ang[..., :1], ang.shape), atol=1e-4)
+  assert np.all(np.abs(ang) <= np.radians(20.0) + 1e-6) and np.ptp(ang[..., 0]) > 0.05
+  np.testing.assert_array_equal(turned, triplets.turn_clouds(pts, np.radians(20.0), seed=1))
+
+
 def test_triplet_diagnostics_cli_names_a_missing_checkpoint(synthetic_root, tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.triplet_diagnostics',
                         '--config=configs/3dfeatnet_small.py:pretrain',

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import ml_collections
 import numpy as np
 
-from ssd_jax import grouping, inference, objective, train
+from ssd_jax import geometry, grouping, inference, objective, train
 from ssd_jax.registration import features
 
 
@@ -41,6 +41,15 @@ def checkpoint_probe(model: inference.Model, config: ml_collections.ConfigDict,
                                                    config=config))
   metrics = probe(state, jnp.asarray(triplets), jax.random.key(config.seed + 2))
   return {k: float(v) for k, v in metrics.items()}
+
+
+def turn_clouds(triplets: np.ndarray, max_angle: float, seed: int = 0) -> np.ndarray:
+  """Each cloud of triplets [T, 3, N, 3] metres turned about z by its own angle drawn
+  uniformly from [-max_angle, max_angle] radians (max_angle pi: Rotate1D) -> same shape.
+  Drawn on the host from `seed`, so every checkpoint sees the same turns."""
+  phi = np.random.default_rng(seed).uniform(-max_angle, max_angle, triplets.shape[:2])
+  rz = np.asarray(geometry.rotation_z(phi), np.float32)   # [T, 3, 3, 3]
+  return np.einsum('tcij,tcnj->tcni', rz, triplets).astype(np.float32)
 
 
 def fpfh_probe(triplets: np.ndarray, num_centers: int, seed: int = 0, margin: float = 0.2,
