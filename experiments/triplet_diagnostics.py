@@ -79,8 +79,8 @@ def main(argv):
                                for a, c in zip(anchors, centers)], axis=1)
       o = orientation.summarize(errors)
       print(f"| {name} | {o['median_deg']:.1f} | {o['within']:.3f} |")
-  _, checkpoint = models[1]
-  print(f'\n{models[1][0]} with each cloud turned by its own uniform angle within the range '
+  name, checkpoint = models[1]
+  print(f'\n{name} with each cloud turned by its own uniform angle within the range '
         '(±180°: Rotate1D)\n')
   print('| turns within | triplet loss | accuracy |\n|---|---|---|')
   for deg in TURN_RANGES_DEG:

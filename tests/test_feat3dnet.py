@@ -235,7 +235,7 @@ def test_turn_clouds_turns_each_cloud_about_z_within_range():
   np.testing.assert_allclose(turned[..., 2], pts[..., 2], atol=1e-6)
   np.testing.assert_allclose(np.linalg.norm(turned[..., :2], axis=-1),
                              np.linalg.norm(pts[..., :2], axis=-1), rtol=1e-5)
-  # angle of each cloud from its first point; one angle per cloud, all within +-20 deg
+  # every point of a cloud turns by that cloud's one angle, within +-20 deg
   ang = np.angle((turned[..., 0] + 1j * turned[..., 1]) / (pts[..., 0] + 1j * pts[..., 1]))
   np.testing.assert_allclose(ang, np.broadcast_to(ang[..., :1], ang.shape), atol=1e-4)
   assert np.all(np.abs(ang) <= np.radians(20.0) + 1e-6) and np.ptp(ang[..., 0]) > 0.05
