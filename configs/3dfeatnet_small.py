@@ -17,7 +17,8 @@ Expected (seed 0, 2-core VM, measured 2026-11-23), as `probe_loss` in metrics.js
 of augmentations and centres, running BatchNorm statistics):
 stage 1 falls from 0.188 (step 0) to 0.155 (step 600), triplet accuracy 0.60 -> 0.65.
 Stage 2 (Rotate1D: every cloud turned by its own uniform angle) stays at its start,
-0.198 -> 0.198 after 3,000 steps. Without Rotate1D
+0.198 -> 0.198 after 3,000 steps; resumed to 18,000 steps it still swings at chance,
+0.192 to 0.204 (measured 2026-11-24). Without Rotate1D
 (`--config.model.augmentations="('jitter','rotate_small','shift')"`) it falls from
 0.162 to 0.060 in 600 steps; with Rotate1D but each cloud its own positive
 (`--config.data.triplet_positives=self`) from 0.195 to 0.138 in 3,000 steps.
