@@ -10,7 +10,8 @@ Commands (Oxford RobotCar as processed by 3DFeat-Net):
         --workdir=runs/feat3dnet_paper --config.data.path=/data/oxford/train/train.txt
 
 Triplets (anchor, positive < 10 m, negative: neither positive nor non-negative)
-from train.txt; the attention-weighted triplet loss with margin 0.2; batch 6
+from train.txt; the attention-weighted triplet loss with margin 0.2 (one hinge on
+the attention-weighted sums of each triplet, as 3DFeat-Net's released code); batch 6
 triplets of 4,096 points, 512 FPS clusters of 64 points within 2 m, D = 32;
 Adam 1e-5; Jitter, RotateSmall and Shift, plus Rotate1D in stage 2. With 21,875
 training clouds an epoch is ~3,650 steps. The reference's released model is what

@@ -50,6 +50,11 @@ def get_config() -> ml_collections.ConfigDict:
   model.attention_in_cf = False  # True: the self-supervised detector, w_ij * a_i * b_j in CF
   # Triplet objective only (REFERENCE §3):
   model.margin = 0.2
+  # One hinge on the attention-weighted sums (cloud, 3DFeat-Net's released code) or
+  # one per anchor cluster (cluster); attention normalised by a softmax (REFERENCE §3)
+  # or by its sum (the released code's softplus / sum).
+  model.triplet_hinge = 'cloud'              # cloud | cluster
+  model.attention_normalization = 'softmax'  # softmax | sum
   model.augmentations = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
 
   config.train = train = ml_collections.ConfigDict()

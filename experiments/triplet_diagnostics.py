@@ -59,7 +59,8 @@ def main(argv):
   if FLAGS.fpfh:
     rows.append(('FPFH (rotation invariant)', 'any',
                  triplets.fpfh_probe(probe, config.model.num_clusters, config.seed,
-                                     config.model.margin)))
+                                     config.model.margin,
+                                     hinge=config.model.triplet_hinge)))
   print(f'{len(probe)} probe triplets of {config.data.path}, {config.data.num_points} points, '
         f'{config.model.num_clusters} clusters per cloud\n')
   print('| descriptor | clouds | triplet loss | accuracy (d_pos < d_neg) |\n|---|---|---|---|')

@@ -90,22 +90,43 @@ def _best_match_distance(feat_a: jax.Array, feat_o: jax.Array, mask_o: jax.Array
   return jnp.sqrt(jnp.maximum(jnp.min(d2, axis=1), 1e-12))
 
 
+TRIPLET_HINGES = ('cloud', 'cluster')
+ATTENTION_NORMALIZATIONS = ('softmax', 'sum')
+
+
 def attention_weighted_triplet(desc: jax.Array, attention: jax.Array, mask: jax.Array,
-                               margin: float) -> tuple[jax.Array, dict[str, jax.Array]]:
+                               margin: float, hinge: str = 'cloud',
+                               normalization: str = 'softmax'
+                               ) -> tuple[jax.Array, dict[str, jax.Array]]:
   """3DFeat-Net's loss (REFERENCE §3) for one triplet.
 
   desc [3, k, D] (anchor, positive, negative), attention [3, k] >= 0, mask [3, k]
   bool. For anchor cluster i: d_pos = distance to its best match in the positive
-  cloud, d_neg the same in the negative; weight = softmax of the anchor's
-  attention over its valid clusters. -> (sum_i w_i max(0, d_pos - d_neg + margin), stats).
+  cloud, d_neg the same in the negative; w = the anchor's attention normalised over
+  its valid clusters, by a softmax (`normalization='softmax'`, REFERENCE's wording) or
+  by its sum (`'sum'`, 3DFeat-Net's released code). The hinge sits on each cluster
+  (`hinge='cluster'`: sum_i w_i max(0, d_pos_i - d_neg_i + margin)) or on the weighted
+  sums (`'cloud'`, the released code: max(0, sum_i w_i d_pos_i - sum_i w_i d_neg_i +
+  margin)). -> (loss, stats).
   """
   d_pos = _best_match_distance(desc[0], desc[1], mask[1])
   d_neg = _best_match_distance(desc[0], desc[2], mask[2])
-  w = jax.nn.softmax(jnp.where(mask[0], attention[0], -jnp.inf))
-  hinge = jnp.maximum(d_pos - d_neg + margin, 0.0)
+  if normalization == 'softmax':
+    w = jax.nn.softmax(jnp.where(mask[0], attention[0], -jnp.inf))
+  elif normalization == 'sum':
+    a = jnp.where(mask[0], attention[0], 0.0)
+    w = a / jnp.maximum(jnp.sum(a), 1e-12)
+  else:
+    raise ValueError(f"normalization must be 'softmax' or 'sum', got {normalization!r}")
   stats = {'positive_distance': jnp.sum(w * d_pos), 'negative_distance': jnp.sum(w * d_neg),
            'triplet_accuracy': jnp.sum(w * (d_pos < d_neg))}
-  return jnp.sum(w * hinge), stats
+  if hinge == 'cluster':
+    loss = jnp.sum(w * jnp.maximum(d_pos - d_neg + margin, 0.0))
+  elif hinge == 'cloud':
+    loss = jnp.maximum(stats['positive_distance'] - stats['negative_distance'] + margin, 0.0)
+  else:
+    raise ValueError(f"hinge must be 'cluster' or 'cloud', got {hinge!r}")
+  return loss, stats
 
 
 def triplet_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,
@@ -140,7 +161,8 @@ def triplet_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,
                                                cfg.num_samples)
   (desc, attention, _), new_batch_stats = _apply(model, variables, clusters, train)
   k = cfg.num_clusters
-  per_triplet, stats = jax.vmap(lambda d, a, m: attention_weighted_triplet(d, a, m, cfg.margin))(
+  per_triplet, stats = jax.vmap(lambda d, a, m: attention_weighted_triplet(
+      d, a, m, cfg.margin, cfg.triplet_hinge, cfg.attention_normalization))(
       desc.reshape(b, three, k, -1), attention.reshape(b, three, k),
       (has_nb & cvalid).reshape(b, three, k))
   metrics = {'loss': jnp.mean(per_triplet), **{key_: jnp.mean(v) for key_, v in stats.items()}}

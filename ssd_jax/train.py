@@ -75,6 +75,11 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'data.triplet_positives must be one of {pipeline.TRIPLET_POSITIVES}, '
           f'got {d.triplet_positives!r}')
   require(m.margin >= 0, f'model.margin must be >= 0, got {m.margin}')
+  require(m.triplet_hinge in objective.TRIPLET_HINGES,
+          f'model.triplet_hinge must be one of {objective.TRIPLET_HINGES}, got {m.triplet_hinge!r}')
+  require(m.attention_normalization in objective.ATTENTION_NORMALIZATIONS,
+          f'model.attention_normalization must be one of {objective.ATTENTION_NORMALIZATIONS}, '
+          f'got {m.attention_normalization!r}')
   require(not (m.attention_in_cf and not m.use_orientation),
           'model.attention_in_cf needs model.use_orientation (the detector predicts attention)')
   require(m.descriptor_dim in network.DESCRIPTOR_DIMS,
@@ -254,14 +259,24 @@ def _check_finite(pending: list[tuple[int, dict]], ckpt: checkpoint.Checkpointer
           + (f'step {last} in {ckpt.directory}' if last is not None else 'none yet'))
 
 
+# Triplet-loss keys added after runs were written, with the value those runs used.
+ADDED_MODEL_KEYS = {'triplet_hinge': 'cluster', 'attention_normalization': 'softmax'}
+
+
 def check_resumable(config: ml_collections.ConfigDict, stored: dict, directory: str) -> None:
   """Refuse to continue a checkpoint written with a different model or seed."""
   current = json.loads(json.dumps(config.to_dict()))   # tuples -> lists, as stored
   for section in ('model',):
     for key, value in current[section].items():
-      if stored.get(section, {}).get(key) != value:
+      if key not in stored.get(section, {}) and key in ADDED_MODEL_KEYS:
+        if stored.get('objective') != 'triplet':
+          continue   # a triplet-only setting that the stored run never used
+        was = ADDED_MODEL_KEYS[key]
+      else:
+        was = stored.get(section, {}).get(key)
+      if was != value:
         raise ConfigError(
-            f'{directory} holds a run with {section}.{key}={stored.get(section, {}).get(key)!r}, '
+            f'{directory} holds a run with {section}.{key}={was!r}, '
             f'but the config says {value!r}; use a new --workdir or the same config')
   if stored.get('seed') != config.seed:
     raise ConfigError(f'{directory} holds a run with seed={stored.get("seed")}, but the config '

@@ -28,7 +28,7 @@ def test_attention_weighted_triplet_by_hand():
                     [[s, s], [-1.0, 0.0]]])
   attention = jnp.array([[np.log(3.0), 0.0], [0.0, 0.0], [0.0, 0.0]])
   mask = jnp.array([[True, True], [True, True], [True, False]])
-  loss, stats = objective.attention_weighted_triplet(desc, attention, mask, margin=0.2)
+  loss, stats = objective.attention_weighted_triplet(desc, attention, mask, 0.2, 'cluster')
   d_sq = np.sqrt(2 - 2 * s)              # distance between (1, 0) and (s, s), also (0, 1)-(s, s)
   d_pos = np.array([0.0, d_sq])          # a0 matches exactly, a1's best is (s, s)
   d_neg = np.array([d_sq, d_sq])         # only (s, s) is valid in the negative
@@ -36,8 +36,27 @@ def test_attention_weighted_triplet_by_hand():
   expected = np.sum(w * np.maximum(d_pos - d_neg + 0.2, 0.0))   # 0.75 * 0 + 0.25 * 0.2
   assert float(loss) == pytest.approx(expected, abs=1e-5) and expected == pytest.approx(0.05)
   assert float(stats['triplet_accuracy']) == pytest.approx(0.75)
-  grad = jax.grad(lambda a: objective.attention_weighted_triplet(desc, a, mask, 0.2)[0])(attention)
+  grad = jax.grad(
+      lambda a: objective.attention_weighted_triplet(desc, a, mask, 0.2, 'cluster')[0])(attention)
   assert float(grad[0, 0]) < 0 < float(grad[0, 1])   # attention moves to the cluster that matches
+
+  # 3DFeat-Net's released code: softplus attention divided by its sum, one hinge on the
+  # weighted sums. Attention (1, 3) -> w = (0.25, 0.75).
+  attention = jnp.array([[1.0, 3.0], [0.0, 0.0], [0.0, 0.0]])
+  def loss_of(a, hinge, m=mask):
+    return objective.attention_weighted_triplet(desc, a, m, 0.2, hinge, 'sum')[0]
+  w = np.array([0.25, 0.75])
+  cloud = max(np.sum(w * d_pos) - np.sum(w * d_neg) + 0.2, 0.0)     # 0.2 - 0.25 * d_sq
+  assert float(loss_of(attention, 'cloud')) == pytest.approx(cloud, abs=1e-5)
+  assert cloud == pytest.approx(0.2 - 0.25 * d_sq) and cloud > 0
+  assert float(loss_of(attention, 'cluster')) == pytest.approx(0.75 * 0.2, abs=1e-5)
+  grad = jax.grad(lambda a: loss_of(a, 'cloud'))(attention)
+  assert float(grad[0, 0]) < 0 < float(grad[0, 1])
+  # A masked anchor cluster gets no weight: only a0 counts, d_pos - d_neg + 0.2 < 0.
+  anchor_a0 = mask.at[0, 1].set(False)
+  assert float(loss_of(attention, 'cloud', anchor_a0)) == 0.0
+  with pytest.raises(ValueError, match="hinge must be 'cluster' or 'cloud'"):
+    loss_of(attention, 'triplet')
 
 
 def test_triplet_dataset_draws_valid_triplets(synthetic_root):

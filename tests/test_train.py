@@ -81,7 +81,9 @@ def test_config_errors_name_the_value(tiny_config):
            ('model.loss', 'l1', 'model.loss must be one of'),
            ('model.center_sampling', 'grid', 'center_sampling must be one of'),
            ('data.num_points', 32, r'data.num_points \(32\) must be >= model.num_clusters'),
-           ('model.radius', 0.0, 'radius must be > 0')]
+           ('model.radius', 0.0, 'radius must be > 0'),
+           ('model.triplet_hinge', 'anchor', "triplet_hinge must be one of .*'anchor'"),
+           ('model.attention_normalization', 'max', 'attention_normalization must be one of')]
   for field, value, message in cases:
     config = tiny_config.copy_and_resolve_references()
     section, name = field.split('.')
@@ -146,7 +148,11 @@ def test_divergence_stops_with_a_clear_message(tiny_config, tmp_path, monkeypatc
 
 @pytest.mark.parametrize('source', [('kitti_object_velodyne',), ('example',), 'synthetic'])
 def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
-  """On both real formats and on the generated synthetic training folder."""
+  """On both real formats and on the generated synthetic training folder.
+
+  Compares medians of 5-step means: at batch 2 the loss is heavy-tailed (a hard batch
+  whose CF rotation fails costs ~10x the median), so one unlucky window late in a short
+  run must not decide, while a run that stops learning still fails."""
   from configs import cpu_small
   config = cpu_small.get_config()
   config.progress_bar = False
@@ -162,15 +168,16 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
   config.model.num_clusters = 128
   # The four `example` clouds (two Oxford models, two KITTI scans) learn more slowly.
   config.train.num_steps = 150 if source == ('example',) else 75
-  config.train.log_every = 15
+  config.train.log_every = 5
   config.train.checkpoint_every = config.train.num_steps
   train.train_and_evaluate(config, str(tmp_path / 'run'))
   logs = _read_metrics(tmp_path / 'run')
-  mean = lambda rows, key: sum(r[key] for r in rows) / len(rows)
-  first, last = logs[:2], logs[-2:]   # 30-step windows
-  print(source, logs)
-  assert mean(last, 'loss') < 0.8 * mean(first, 'loss')
-  assert mean(last, 'rotation_error_deg') < 0.8 * mean(first, 'rotation_error_deg')
+  median = lambda rows, key: float(np.median([r[key] for r in rows]))
+  first, late = logs[:3], logs[len(logs) // 2:]   # steps 1-15; the second half of the run
+  print(source, [(r['step'], round(r['loss'], 3), round(r['rotation_error_deg'], 2))
+                 for r in logs])
+  assert median(late, 'loss') < 0.8 * median(first, 'loss')
+  assert median(late, 'rotation_error_deg') < 0.8 * median(first, 'rotation_error_deg')
 
 
 def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
@@ -237,6 +244,20 @@ def test_resuming_with_a_different_model_is_refused(tiny_config, tmp_path):
   tiny_config.train.num_steps = 4
   with pytest.raises(train.ConfigError, match='model.descriptor_dim=32, but the config says 64'):
     train.train_and_evaluate(tiny_config, str(tmp_path))
+
+
+def test_runs_from_before_a_model_key_existed_resume_with_its_old_value(tiny_config):
+  tiny_config.objective = 'triplet'
+  stored = json.loads(json.dumps(tiny_config.to_dict()))
+  for key in train.ADDED_MODEL_KEYS:
+    del stored['model'][key]
+  tiny_config.model.triplet_hinge = 'cluster'
+  train.check_resumable(tiny_config, stored, 'old_run')      # what old runs used: accepted
+  tiny_config.model.triplet_hinge = 'cloud'
+  with pytest.raises(train.ConfigError, match="old_run holds a run with model.triplet_hinge='cluster'"):
+    train.check_resumable(tiny_config, stored, 'old_run')
+  stored['objective'] = 'self_supervised'    # never used the triplet loss: nothing to refuse
+  train.check_resumable(tiny_config, stored, 'old_run')
 
 
 def test_metrics_writer_keeps_what_the_checkpoint_covers(tmp_path):

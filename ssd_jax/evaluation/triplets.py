@@ -53,10 +53,12 @@ def turn_clouds(triplets: np.ndarray, max_angle: float, seed: int = 0) -> np.nda
 
 
 def fpfh_probe(triplets: np.ndarray, num_centers: int, seed: int = 0, margin: float = 0.2,
-               fpfh_max_nn: int = features.FPFH_MAX_NN) -> dict[str, float]:
+               fpfh_max_nn: int = features.FPFH_MAX_NN, hinge: str = 'cloud'
+               ) -> dict[str, float]:
   """Hardest-match triplet statistics of L2-normalised FPFH on triplets [T, 3, N, 3] metres,
   at `num_centers` FPS centres per cloud (one key per triplet, so identical clouds get
-  identical centres), all clusters weighted alike. -> {'loss', 'triplet_accuracy', ...}."""
+  identical centres), all clusters weighted alike; `hinge` as in
+  `objective.attention_weighted_triplet`. -> {'loss', 'triplet_accuracy', ...}."""
   stats = []
   for t, triplet in enumerate(triplets):
     key = jax.random.fold_in(jax.random.key(seed), t)
@@ -68,6 +70,6 @@ def fpfh_probe(triplets: np.ndarray, num_centers: int, seed: int = 0, margin: fl
       descs.append(d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12))
     desc = jnp.asarray(np.stack(descs))
     loss, s = objective.attention_weighted_triplet(
-        desc, jnp.zeros(desc.shape[:2]), jnp.ones(desc.shape[:2], bool), margin)
+        desc, jnp.zeros(desc.shape[:2]), jnp.ones(desc.shape[:2], bool), margin, hinge)
     stats.append({'loss': float(loss), **{k: float(v) for k, v in s.items()}})
   return {k: float(np.mean([s[k] for s in stats])) for k in stats[0]}
