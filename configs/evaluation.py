@@ -11,7 +11,9 @@ def get_config() -> ml_collections.ConfigDict:
   # Names are Python identifiers so that `--config.checkpoints.feat3dnet=DIR` parses.
   config.checkpoints = ml_collections.ConfigDict({
       'ours': 'runs/cpu_small',               # self-supervised (this paper)
-      'feat3dnet': 'runs/feat3dnet_small',    # weakly supervised 3DFeat-Net baseline
+      # Weakly supervised 3DFeat-Net baseline: configs/3dfeatnet_small_varied.py, whose
+      # stage 2 learns under Rotate1D (README, "3DFeat-Net baseline").
+      'feat3dnet': 'runs/feat3dnet_small_varied',
       'ours_detector': 'runs/cpu_small_detector',   # self-supervised detector (extension)
   })
   # keypoints+descriptor: keypoints iss | random | a checkpoint name (its detector);

@@ -21,6 +21,11 @@ def get_config() -> ml_collections.ConfigDict:
   config.voxel_size = 0.2         # metres; 3DFeat-Net's processing
   config.normal_radius = 1.0      # metres, up to 30 neighbours
 
+  # What the streets hold beyond their layout (ssd_jax/synthetic/scene.py, make_scene).
+  config.scene = scene = ml_collections.ConfigDict()
+  scene.clutter_scale = 1.0         # times the drawn density of sidewalk objects
+  scene.varied_objects = False      # eight kinds of object at random yaws, angled cars
+
   # Velodyne HDL-64E-like scanner (angles in degrees, distances in metres).
   config.lidar = lidar = ml_collections.ConfigDict()
   lidar.upper_beams = 32

@@ -1,7 +1,7 @@
 r"""Paper Fig. 3: ISS and learned keypoints as red dots on the same cloud, top view.
 
     python -m experiments.plot_keypoints --cloud=A.bin --out=keypoints.png \
-        [--sources=iss,learned --checkpoint=runs/feat3dnet_small]
+        [--sources=iss,learned --checkpoint=runs/feat3dnet_small_varied]
 
 `learned` keypoints are the checkpoint's detector (attention + NMS, REFERENCE §4);
 it needs a checkpoint whose attention head was trained (the weakly supervised

@@ -65,6 +65,43 @@ def test_different_seeds_give_different_scenes():
                                                          np.sort(s1[:, 2])[:100])
 
 
+def _off_axis_share(scene, label, min_degrees=10.0):
+  """Area share of `label`'s vertical faces turned > min_degrees off the street axes."""
+  p = scene.vertices[label].astype(np.float64)[scene.triangles[label]]
+  normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+  area = np.linalg.norm(normal, axis=1)
+  vertical = (area > 1e-9) & (np.abs(normal[:, 2]) < 0.1 * np.maximum(area, 1e-12))
+  _, nearest = spatial.cKDTree(scene.centerline.xy).query(p[vertical].mean(1)[:, :2])
+  turn = np.degrees(np.arctan2(normal[vertical, 1], normal[vertical, 0])
+                    - scene.centerline.heading[nearest])
+  off = np.abs((turn + 45.0) % 90.0 - 45.0) > min_degrees
+  return float(np.sum(area[vertical] * off) / np.sum(area[vertical]))
+
+
+def test_scene_options_add_turned_objects():
+  rng = lambda seed: np.random.default_rng((seed, 9))
+  plain = [scene_lib.make_scene(rng(k), 80.0) for k in range(3)]
+  varied = [scene_lib.make_scene(rng(k), 80.0, clutter_scale=5.0, varied_objects=True)
+            for k in range(3)]
+  bare = scene_lib.make_scene(rng(0), 80.0, clutter_scale=0.0)
+  clutter = scene_lib.Label.CLUTTER
+  assert clutter not in bare.triangles and len(plain[0].triangles[clutter]) > 0
+  # The street layout is drawn before any object, so it does not change with the options.
+  assert all(p.style.road_half_width == v.style.road_half_width for p, v in zip(plain, varied))
+  assert (sum(len(v.triangles[clutter]) for v in varied)
+          > 4 * sum(len(p.triangles[clutter]) for p in plain))
+  for p, v in zip(plain, varied):
+    # Default cars are parked along the curb (yaw ~ N(0, 1.7 deg)); half of the varied
+    # ones are turned by up to 34 deg. Varied clutter faces every way.
+    assert _off_axis_share(p, scene_lib.Label.CAR) < 0.02
+    assert _off_axis_share(v, scene_lib.Label.CAR) > 0.15
+    assert _off_axis_share(v, clutter) > 0.5
+  bad = tiny_config()
+  bad.scene.clutter_scale = -1.0
+  with pytest.raises(dataset.SyntheticConfigError, match=r'scene.clutter_scale must be >= 0'):
+    dataset.check_config(bad)
+
+
 def _overlap(cloud1, cloud2, t_12, radius=0.3):
   """Fraction of cloud-2 points within radius of cloud 1 after mapping by T_12."""
   dist, _ = spatial.cKDTree(cloud1).query(geometry.apply_transform(t_12, cloud2.astype(float)))

@@ -59,6 +59,7 @@ def check_config(config) -> None:
     positive(f'{split}.num_scenes', config[split].num_scenes, allow_zero=True)
     positive(f'{split}.spacing', config[split].spacing)
   positive('voxel_size', config.voxel_size, allow_zero=True)
+  positive('scene.clutter_scale', config.scene.clutter_scale, allow_zero=True)
   positive('normal_radius', config.normal_radius)
   positive('test_oxford.num_points', config.test_oxford.num_points)
   positive('test_oxford.voxel_size', config.test_oxford.voxel_size, allow_zero=True)
@@ -106,7 +107,8 @@ class Drive:
 def _scene_and_poses(config, split: str, index: int):
   seed = (int(config.seed), SPLITS[split], index)
   rng = np.random.default_rng(seed)
-  scene = scene_lib.make_scene(rng, config.scene_length)
+  scene = scene_lib.make_scene(rng, config.scene_length, config.scene.clutter_scale,
+                               config.scene.varied_objects)
   split_cfg = config[split]
   poses = trajectory.drive(scene, rng, split_cfg.spacing, config.lidar.mount_height,
                            spacing_jitter=split_cfg.get('spacing_jitter', 0.0))

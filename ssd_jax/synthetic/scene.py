@@ -357,9 +357,61 @@ def _clutter(b: _MeshBuilder, rng: np.random.Generator, s: float, d: float) -> N
     b.box(Label.CLUTTER, s, d, 0.0, (1.0, 0.5, 1.4))
 
 
-def make_scene(rng: np.random.Generator, length: float = 240.0) -> Scene:
-  """A new random street about `length` metres long."""
+def _varied_clutter(b: _MeshBuilder, rng: np.random.Generator, s: float, d: float,
+                    template) -> None:
+  """Sidewalk objects of eight kinds, each at a random yaw and size.
+
+  `_clutter`'s objects face the street, so in a cloud turned about z they tell little
+  apart; these give a 2-4 m neighbourhood a shape of its own that survives the turn.
+  """
+  kind, yaw = rng.integers(8), rng.uniform(-np.pi, np.pi)
+  if kind == 0:    # box or bin
+    b.box(Label.CLUTTER, s, d, 0.0,
+          (rng.uniform(0.4, 1.5), rng.uniform(0.4, 1.2), rng.uniform(0.5, 1.6)), yaw)
+  elif kind == 1:  # a row of one to three bollards
+    for k in range(rng.integers(1, 4)):
+      b.cylinder(Label.CLUTTER, s + 1.2 * k, d, 0.0, rng.uniform(0.08, 0.2), rng.uniform(0.6, 1.2))
+  elif kind == 2:  # bench with a backrest
+    b.box(Label.CLUTTER, s, d, 0.0, (1.8, 0.5, 0.45), yaw)
+    b.box(Label.CLUTTER, s + 0.25 * np.sin(yaw), d, 0.45, (1.8, 0.08, 0.45), yaw)
+  elif kind == 3:  # electrical cabinet
+    b.box(Label.CLUTTER, s, d, 0.0, (1.0, 0.5, 1.4), yaw)
+  elif kind == 4:  # boulder
+    r = rng.uniform(0.3, 1.0)
+    b.blob(Label.CLUTTER, rng, s, d, r * 0.4, (r * rng.uniform(0.8, 1.6), r, r * 0.7), template)
+  elif kind == 5:  # table on a central leg
+    b.box(Label.CLUTTER, s, d, 0.7, (1.2, 0.8, 0.06), yaw)
+    b.cylinder(Label.CLUTTER, s, d, 0.0, 0.05, 0.7)
+  elif kind == 6:  # L-shaped low wall
+    l1, l2 = rng.uniform(1.0, 3.0, 2)
+    b.box(Label.CLUTTER, s, d, 0.0, (l1, 0.25, rng.uniform(0.4, 1.2)), yaw)
+    b.box(Label.CLUTTER, s + l1 / 2 * np.cos(yaw), d + l1 / 2 * np.sin(yaw), 0.0,
+          (0.25, l2, rng.uniform(0.4, 1.2)), yaw)
+  else:            # planter with a shrub
+    w = rng.uniform(0.6, 1.4)
+    b.box(Label.CLUTTER, s, d, 0.0, (w, w, 0.5), yaw)
+    _bush(b, rng, s, d, template)
+
+
+def _angled_car(b: _MeshBuilder, rng: np.random.Generator, s: float, d: float) -> None:
+  """A car parked at up to ±34° to the curb, of 0.8-1.3 times the usual size."""
+  scale, yaw = rng.uniform(0.8, 1.3), rng.uniform(-0.6, 0.6)
+  length, width = 4.3 * scale, 1.8 * scale
+  b.box(Label.CAR, s, d, 0.3, (length, width, rng.uniform(0.6, 1.2) * scale), yaw)
+  b.box(Label.CAR, s, d, 0.3 + 0.75 * scale, (rng.uniform(0.4, 0.7) * length, 0.9 * width,
+                                              0.55 * scale), yaw)
+
+
+def make_scene(rng: np.random.Generator, length: float = 240.0, clutter_scale: float = 1.0,
+               varied_objects: bool = False) -> Scene:
+  """A new random street about `length` metres long.
+
+  `clutter_scale` multiplies the drawn density of sidewalk objects. `varied_objects`
+  draws them from eight kinds at random yaws (`_varied_clutter`) and parks half of
+  the cars at an angle; the default scene draws exactly as before either option existed.
+  """
   style = sample_style(rng, length)
+  style = dataclasses.replace(style, clutter_per_100m=style.clutter_per_100m * clutter_scale)
   line = Centerline.from_style(style, rng)
   scene = Scene(style, line, rng.uniform(0, 2 * np.pi), {}, {})
   b = _MeshBuilder(line, scene.ground_height)
@@ -410,9 +462,17 @@ def make_scene(rng: np.random.Generator, length: float = 240.0) -> Scene:
     s = -15.0 + rng.uniform(0, 6)
     while s < end:       # parked cars along the curb
       if rng.uniform() < style.parked_car_probability:
-        _car(b, rng, s, side * (hw - 1.1 - rng.uniform(0, 0.2)))
+        d = side * (hw - 1.1 - rng.uniform(0, 0.2))
+        if varied_objects and rng.uniform() < 0.5:
+          _angled_car(b, rng, s, d)
+        else:
+          _car(b, rng, s, d)
       s += rng.uniform(5.5, 7.5)
     for _ in range(rng.poisson(style.clutter_per_100m * (end + 15) / 100)):
-      _clutter(b, rng, rng.uniform(-15, end), side * (hw + rng.uniform(0.4, sw - 0.3)))
+      s, d = rng.uniform(-15, end), side * (hw + rng.uniform(0.4, sw - 0.3))
+      if varied_objects:
+        _varied_clutter(b, rng, s, d, bush)
+      else:
+        _clutter(b, rng, s, d)
   scene.vertices, scene.triangles = b.build()
   return scene
