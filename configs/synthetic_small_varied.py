@@ -1,6 +1,6 @@
 """A training split with turn-distinctive street furniture, for the triplet baseline.
 
-Command (~2 minutes on 2 CPU cores):
+Command (~40 s on 2 CPU cores):
 
     python -m experiments.make_synthetic --config=configs/synthetic_small_varied.py \
         --out=data_cache/synthetic_small_varied
