@@ -9,12 +9,13 @@ import ml_collections
 def get_config() -> ml_collections.ConfigDict:
   config = ml_collections.ConfigDict()
   # Names are Python identifiers so that `--config.checkpoints.feat3dnet=DIR` parses.
+  # Each is a shipped pretrained model's name (ssd_jax/weights/<name>, see
+  # ssd_jax.pretrained.SHIPPED), an export folder or a training run directory.
   config.checkpoints = ml_collections.ConfigDict({
-      'ours': 'runs/cpu_small',               # self-supervised (this paper)
-      # Weakly supervised 3DFeat-Net baseline: configs/3dfeatnet_small_varied.py, whose
-      # stage 2 learns under Rotate1D (README, "3DFeat-Net baseline").
-      'feat3dnet': 'runs/feat3dnet_small_varied',
-      'ours_detector': 'runs/cpu_small_detector',   # self-supervised detector (extension)
+      'ours': 'ours',                       # self-supervised (configs/cpu_robust.py)
+      # Weakly supervised 3DFeat-Net baseline (configs/3dfeatnet_small_varied.py).
+      'feat3dnet': 'feat3dnet',
+      'ours_detector': 'ours_detector',     # self-supervised detector (extension)
   })
   # keypoints+descriptor: keypoints iss | random | a checkpoint name (its detector);
   # descriptors fpfh | a checkpoint name. The paper's Tables I/II and Fig. 4 rows:

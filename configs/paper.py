@@ -41,8 +41,16 @@ def get_config() -> ml_collections.ConfigDict:
   model.independent_centers = False  # sample the two branches independently
   model.alpha = 1.0              # CF weight temperature (paper)
   model.loss = 'frobenius'       # frobenius (paper) | squared_frobenius (reference code)
+  model.self_rotation = 'gaussian'  # gaussian (paper) | uniform (the whole circle)
   model.rotation_sigma = 0.6     # radians
   model.rotation_clip = 1.8        # radians; the reference code clips phi here
+  model.orientation_head = 'mlp'  # mlp (3DFeat-Net) | equivariant (turns with the cluster)
+  # Branch resampling (label-free; off in the paper): each branch drops up to this
+  # share of its points, and keeps the points within branch_crop_radius metres of a
+  # sensor offset by up to branch_crop_shift metres (0 = no crop).
+  model.branch_dropout = 0.0
+  model.branch_crop_shift = 0.0
+  model.branch_crop_radius = 20.0
   model.jitter_sigma = 0.01      # metres
   model.jitter_clip = 0.05       # metres
   model.bn_momentum = 0.99
@@ -56,6 +64,13 @@ def get_config() -> ml_collections.ConfigDict:
   model.triplet_hinge = 'cloud'              # cloud | cluster
   model.attention_normalization = 'softmax'  # softmax | sum
   model.augmentations = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
+
+  # How the trained network describes keypoints (inference.Model): points per cluster
+  # (0: the training value, model.num_samples) and random samplings of each ball whose
+  # descriptors are averaged.
+  config.inference = inference = ml_collections.ConfigDict()
+  inference.num_samples = 0
+  inference.draws = 1
 
   config.train = train = ml_collections.ConfigDict()
   train.batch_size = 6

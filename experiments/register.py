@@ -2,10 +2,12 @@ r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into clou
 
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin \
         [--keypoints=iss|learned|random] [--descriptor=fpfh|learned|learned,fpfh] \
-        [--checkpoint=runs/cpu_small] [--groundtruth=DIR/groundtruths.txt] \
+        [--checkpoint=ours|RUN_DIR|EXPORT_DIR] [--groundtruth=DIR/groundtruths.txt] \
         [--icp] [--json=OUT.json] [--plot=OUT.png]
 
-Reads .bin (N x 3 / 4 / 6 float32, detected or --format), .npy, .ply, .pcd.
+Reads .bin (N x 3 / 4 / 6 float32, detected or --format), .npy, .ply, .pcd. Learned
+descriptors and keypoints come from the shipped pretrained models (`ours`, and
+`ours_detector` for learned keypoints) unless --checkpoint names another.
 With --groundtruth (a `groundtruths.txt` listing the pair by the clouds' file
 stems, e.g. 000000.bin / 000001.bin), the errors against it are printed too.
 """
@@ -18,7 +20,7 @@ from absl import app
 from absl import flags
 import numpy as np
 
-from ssd_jax import geometry
+from ssd_jax import geometry, pretrained
 from ssd_jax.data import groundtruth, io, pipeline as data_pipeline
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import metrics, pipeline
@@ -29,7 +31,8 @@ flags.DEFINE_string('cloud2', None, 'Source cloud, mapped into cloud 1 by T_12.'
 flags.DEFINE_string('format', 'auto', '.bin layout: auto | xyz | xyzi | xyzn.')
 flags.DEFINE_enum('keypoints', 'iss', pipeline.KEYPOINTS, 'Keypoint detector.')
 flags.DEFINE_list('descriptor', ['fpfh'], 'Descriptor(s): fpfh, learned; a list runs each.')
-flags.DEFINE_string('checkpoint', None, 'Training workdir (or its checkpoints/) for learned.')
+flags.DEFINE_string('checkpoint', None, 'Shipped model name, export folder or training workdir '
+                    'for learned (default: the shipped ours / ours_detector).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding this pair (optional).')
 flags.DEFINE_bool('icp', False, 'Refine with point-to-point ICP (Open3D) after RANSAC.')
 flags.DEFINE_integer('seed', 0, 'RANSAC / random-keypoint seed.')
@@ -61,17 +64,17 @@ def main(argv):
   if bad:
     raise SystemExit(f'error: --descriptor must be among {pipeline.DESCRIPTORS}, got {bad}')
   needs_model = 'learned' in FLAGS.descriptor or FLAGS.keypoints == 'learned'
-  if needs_model and not FLAGS.checkpoint:
-    raise SystemExit('error: learned keypoints/descriptors need --checkpoint=WORKDIR')
+  # The shipped descriptor model's attention is untrained; learned keypoints need the
+  # shipped self-supervised detector.
+  checkpoint = FLAGS.checkpoint or ('ours_detector' if FLAGS.keypoints == 'learned' else 'ours')
   try:
     clouds = [data_pipeline.clean_cloud(io.read_cloud(p, FLAGS.format), p)
               for p in (FLAGS.cloud1, FLAGS.cloud2)]
     t_gt = _ground_truth(FLAGS.groundtruth, FLAGS.cloud1, FLAGS.cloud2) if FLAGS.groundtruth else None
     model = None
     if needs_model:
-      from ssd_jax import inference  # pylint: disable=g-import-not-at-top
-      model = inference.load(FLAGS.checkpoint)
-  except (io.CloudFileError, data_pipeline.CloudDataError, FileNotFoundError) as e:
+      model = pretrained.load(checkpoint)
+  except (io.CloudFileError, data_pipeline.CloudDataError, FileNotFoundError, ValueError) as e:
     raise SystemExit(f'error: {e}') from None
   results = []
   for descriptor in FLAGS.descriptor:
@@ -85,7 +88,7 @@ def main(argv):
     transform = reg.transform
     out = {'keypoints': FLAGS.keypoints, 'descriptor': descriptor,
            'num_keypoints': [len(f1.xyz), len(f2.xyz)], 'inliers': int(reg.inliers.sum()),
-           'trials': reg.trials,
+           'trials': reg.trials, 'model': checkpoint if descriptor == 'learned' else None,
            'seconds': {**{f'cloud1_{k}': v for k, v in f1.seconds.items()},
                        **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds}}
     if FLAGS.icp:

@@ -35,6 +35,10 @@ class Checkpointer:
   def latest_step(self) -> int | None:
     return self._manager.latest_step()
 
+  def all_steps(self) -> list[int]:
+    """The steps of every checkpoint kept, ascending."""
+    return sorted(self._manager.all_steps())
+
   def should_save(self, step: int) -> bool:
     """Checkpoints are taken at every multiple of `every` steps."""
     return step % self.every == 0

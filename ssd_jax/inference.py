@@ -46,29 +46,42 @@ class Model:
     radius: ball-query radius, metres.
     num_samples: points per cluster (c).
     step: the training step, for models restored by `load`.
+    draws: `describe` averages the descriptors of this many random samplings of each
+      ball (1: one sampling, as in training). A cluster holds c points drawn from the
+      ~100-300 points of a 2 m ball in a 0.2 m-voxel scan, so one draw carries sampling
+      noise that averaging removes, at `draws` times the network cost.
   """
   net: network.FeatureNet
   variables: Any
   radius: float = 2.0
   num_samples: int = 64
   step: int | None = None     # training step of a loaded checkpoint
+  draws: int = 1
 
   @classmethod
   def from_config(cls, config: ml_collections.ConfigDict, variables) -> 'Model':
-    net = network.FeatureNet(descriptor_dim=config.model.descriptor_dim,
-                             use_orientation=config.model.get('use_orientation', True),
-                             bn_momentum=config.model.bn_momentum)
-    return cls(net, variables, float(config.model.radius), int(config.model.num_samples))
+    """The network of `config.model` with `variables`, describing as `config.inference`
+    says (runs from before that section describe as they trained)."""
+    settings = config.get('inference') or {}
+    num_samples = int(settings.get('num_samples', 0)) or int(config.model.num_samples)
+    return cls(network.create(config.model), variables, float(config.model.radius),
+               num_samples, draws=int(settings.get('draws', 1)))
+
+
+def checkpoint_directory(run_dir: str | os.PathLike) -> str:
+  """A training run's `checkpoints/` folder (`run_dir` may already be it)."""
+  directory = os.path.join(run_dir, 'checkpoints')
+  if not os.path.isdir(directory):
+    directory = str(run_dir)
+  if not os.path.isdir(directory):
+    raise FileNotFoundError(f'{run_dir}: no such checkpoint directory')
+  return directory
 
 
 def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
   """The model of a training run: `checkpoint_dir` is its workdir or its `checkpoints/`."""
   from ssd_jax import train  # pylint: disable=g-import-not-at-top
-  directory = os.path.join(checkpoint_dir, 'checkpoints')
-  if not os.path.isdir(directory):
-    directory = str(checkpoint_dir)
-  if not os.path.isdir(directory):
-    raise FileNotFoundError(f'{checkpoint_dir}: no such checkpoint directory')
+  directory = checkpoint_directory(checkpoint_dir)
   ckpt = checkpoint.Checkpointer(directory, asynchronous=False)
   if ckpt.latest_step() is None:
     raise FileNotFoundError(f'{directory}: holds no checkpoint')
@@ -174,11 +187,22 @@ def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: st
   """Learned descriptors at keypoints.
 
   points [N, 3] metres (the search surface); keypoints [K, 3] metres (cluster
-  centers) -> [K, D] float32, L2-normalised.
+  centers) -> [K, D] float32, L2-normalised (the normalised mean over `model.draws`
+  samplings of each ball).
   """
-  points = shuffled(check_cloud(points), seed)
+  points = check_cloud(points)
   keypoints = check_cloud(keypoints, 'keypoints')
-  return np.concatenate(_chunks(model, points, keypoints, 'describe', search, chunk))
+  if model.draws < 1:
+    raise ValueError(f'model.draws must be >= 1, got {model.draws}')
+  total = 0.0
+  for draw in range(model.draws):
+    # Draw 0 is the seed's own order, so draws=1 is exactly the single-sampling result.
+    order_seed = seed if draw == 0 else (seed, draw)
+    total = total + np.concatenate(_chunks(model, shuffled(points, order_seed), keypoints,
+                                           'describe', search, chunk))
+  if model.draws == 1:
+    return total
+  return (total / np.linalg.norm(total, axis=1, keepdims=True).clip(1e-12)).astype(np.float32)
 
 
 def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, chunk: int = 512,

@@ -120,6 +120,41 @@ class Detector(nn.Module):
     return attention, angle
 
 
+class EquivariantDetector(nn.Module):
+  """Attention and a z-orientation that turns with the cluster by construction.
+
+  The paper's `Detector` must learn that its orientation turns with the cluster;
+  it learns it only over the angles training shows it. Here every point i gets a
+  weight w_i from features that do not change under a rotation about z (its
+  horizontal distance from the center rho_i, its height z_i, and what the cluster
+  pools from those), and the orientation is the angle of sum_i w_i (x_i, y_i). Turn
+  the cluster by phi and every (x_i, y_i) turns by phi while the w_i stay, so the
+  angle shifts by exactly phi for every phi in [0, 2 pi), and the descriptor of the
+  canonically rotated cluster is invariant. Attention comes from the same invariant
+  features, so it is invariant too.
+  """
+  bn_momentum: float = 0.99
+
+  @nn.compact
+  def __call__(self, clusters: jax.Array, train: bool) -> tuple[jax.Array, jax.Array]:
+    xy, z = clusters[..., :2], clusters[..., 2:]
+    rho = jnp.sqrt(jnp.sum(xy * xy, -1, keepdims=True) + 1e-12)
+    x = MLP((64, 128, 256), self.bn_momentum, name='point_mlp')(
+        jnp.concatenate([rho, z], -1), train)
+    pooled = jnp.max(x, axis=-2)
+    g = MLP((128, 64), self.bn_momentum, name='cluster_mlp')(pooled, train)
+    attention = nn.softplus(nn.Dense(1, name='attention')(g))[..., 0]
+    per_point = jnp.concatenate([x, jnp.broadcast_to(g[..., None, :], (*x.shape[:-1], 64))], -1)
+    w = nn.Dense(1, name='orientation')(per_point)           # [..., c, 1], invariant
+    v = jnp.mean(w * xy, axis=-2)                            # [..., 2], turns with the cluster
+    both_zero = jnp.all(v == 0, axis=-1)
+    angle = jnp.arctan2(v[..., 1], jnp.where(both_zero, 1.0, v[..., 0]))
+    return attention, angle
+
+
+ORIENTATION_HEADS = ('mlp', 'equivariant')
+
+
 class Descriptor(nn.Module):
   """3DFeat-Net part 2: canonically oriented cluster -> L2-normalised descriptor."""
   dim: int = 32
@@ -144,16 +179,23 @@ class FeatureNet(nn.Module):
     descriptor_dim: D in {16, 32, 64, 128}.
     use_orientation: rotate each cluster by the predicted angle before the
       descriptor (False: 3DFeat-Net's descriptor pre-training stage).
+    orientation_head: 'mlp' (3DFeat-Net's `Detector`, the paper) or 'equivariant'
+      (`EquivariantDetector`: the orientation turns with the cluster by construction).
   """
   descriptor_dim: int = 32
   use_orientation: bool = True
   bn_momentum: float = 0.99
+  orientation_head: str = 'mlp'
 
   def setup(self):
     if self.descriptor_dim not in DESCRIPTOR_DIMS:
       raise ValueError(f'descriptor_dim must be one of {DESCRIPTOR_DIMS}, '
                        f'got {self.descriptor_dim}')
-    self.detector = Detector(self.bn_momentum)
+    if self.orientation_head not in ORIENTATION_HEADS:
+      raise ValueError(f'orientation_head must be one of {ORIENTATION_HEADS}, '
+                       f'got {self.orientation_head!r}')
+    detector = Detector if self.orientation_head == 'mlp' else EquivariantDetector
+    self.detector = detector(self.bn_momentum)
     self.descriptor = Descriptor(self.descriptor_dim, self.bn_momentum)
 
   def __call__(self, clusters: jax.Array, train: bool = False):
@@ -172,3 +214,13 @@ class FeatureNet(nn.Module):
   def describe(self, clusters: jax.Array, angle: jax.Array, train: bool = False) -> jax.Array:
     """Descriptors of clusters [..., k, c, 3] seen in the frame rotated by angle [..., k]."""
     return self.descriptor(grouping.rotate_clusters(clusters, angle), train)
+
+
+def create(model_config) -> FeatureNet:
+  """The `FeatureNet` that a config's `model` section describes (the one place it is
+  built, for training and inference alike). Fields added after a run was stored
+  take the value that run was trained with."""
+  return FeatureNet(descriptor_dim=model_config.descriptor_dim,
+                    use_orientation=model_config.get('use_orientation', True),
+                    bn_momentum=model_config.bn_momentum,
+                    orientation_head=model_config.get('orientation_head', 'mlp'))

@@ -24,6 +24,21 @@ def _apply(model, variables, clusters, train):
   return model.apply(variables, clusters, train=False), variables['batch_stats']
 
 
+def resample_branch(key: jax.Array, points: jax.Array, valid: jax.Array,
+                    cfg: ml_collections.ConfigDict) -> jax.Array:
+  """The points one branch keeps, valid [B, N] -> [B, N]: `cfg.branch_dropout` (max share
+  dropped) and `cfg.branch_crop_shift` / `cfg.branch_crop_radius` (metres; a crop around
+  an offset sensor). Points are given in the unrotated frame, so the crop of PC2 is drawn
+  in PC1's frame: the same thing as a crop drawn after the rotation."""
+  k_drop, k_crop = jax.random.split(key)
+  if cfg.get('branch_dropout', 0.0) > 0:
+    valid = augment.point_dropout(k_drop, valid, cfg.branch_dropout)
+  if cfg.get('branch_crop_shift', 0.0) > 0:
+    valid = augment.crop_around_offset(k_crop, points, valid, cfg.branch_crop_shift,
+                                       cfg.branch_crop_radius)
+  return valid
+
+
 def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,
                          points: jax.Array, valid: jax.Array,
                          cfg: ml_collections.ConfigDict, train: bool = True):
@@ -42,19 +57,25 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
     (loss, (metrics, new_batch_stats)); metrics hold per-pair rotation errors.
   """
   k_rot, k_jit1, k_jit2, k_c1, k_c2 = jax.random.split(key, 5)
+  # Folded in, not split off, so the paper's setting draws what it drew before.
+  k_res1, k_res2 = jax.random.split(jax.random.fold_in(key, 1))
   b = points.shape[0]
-  pc2, r_gt = augment.self_rotate(k_rot, points, cfg.rotation_sigma, cfg.rotation_clip)
+  pc2, r_gt = augment.self_rotate(k_rot, points, cfg.rotation_sigma, cfg.rotation_clip,
+                                  cfg.get('self_rotation', 'gaussian'))
   pc1 = augment.jitter(k_jit1, points, cfg.jitter_sigma, cfg.jitter_clip)
   pc2 = augment.jitter(k_jit2, pc2, cfg.jitter_sigma, cfg.jitter_clip)
+  # Each branch may see its own subset of the points (the paper: both see all).
+  valid1 = resample_branch(k_res1, points, valid, cfg)
+  valid2 = resample_branch(k_res2, points, valid, cfg)
   both = jnp.concatenate([pc1, pc2], 0)
-  both_valid = jnp.concatenate([valid, valid], 0)
+  both_valid = jnp.concatenate([valid1, valid2], 0)
 
   # Same key in both branches: FPS starts at the same point and (PC2 being PC1
   # rotated, in the same order) picks almost the same centers, as the reference.
   center_keys = (k_c1, k_c2) if cfg.independent_centers else (k_c1, k_c1)
-  idx1, cvalid1 = grouping.sample_centers(center_keys[0], pc1, valid, cfg.num_clusters,
+  idx1, cvalid1 = grouping.sample_centers(center_keys[0], pc1, valid1, cfg.num_clusters,
                                           cfg.center_sampling)
-  idx2, cvalid2 = grouping.sample_centers(center_keys[1], pc2, valid, cfg.num_clusters,
+  idx2, cvalid2 = grouping.sample_centers(center_keys[1], pc2, valid2, cfg.num_clusters,
                                           cfg.center_sampling)
   idx = jnp.concatenate([idx1, idx2], 0)
   centers = jnp.take_along_axis(both, idx[..., None], axis=1)  # [2B, k, 3]

@@ -22,7 +22,7 @@ import numpy as np
 import optax
 from tqdm import auto as tqdm
 
-from ssd_jax import checkpoint, losses, network, objective
+from ssd_jax import augment, checkpoint, losses, network, objective
 from ssd_jax import grouping
 from ssd_jax.data import pipeline
 
@@ -93,10 +93,26 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
   require(m.center_sampling in grouping.SAMPLERS,
           f'model.center_sampling must be one of {grouping.SAMPLERS}, got {m.center_sampling!r}')
   require(m.rotation_sigma >= 0, f'model.rotation_sigma must be >= 0, got {m.rotation_sigma}')
+  require(m.self_rotation in augment.SELF_ROTATIONS,
+          f'model.self_rotation must be one of {augment.SELF_ROTATIONS}, got {m.self_rotation!r}')
+  require(m.orientation_head in network.ORIENTATION_HEADS,
+          f'model.orientation_head must be one of {network.ORIENTATION_HEADS}, '
+          f'got {m.orientation_head!r}')
+  require(0 <= m.branch_dropout <= 0.9,
+          f'model.branch_dropout must be in [0, 0.9], got {m.branch_dropout}')
+  require(m.branch_crop_shift >= 0,
+          f'model.branch_crop_shift must be >= 0 metres, got {m.branch_crop_shift}')
+  require(m.branch_crop_radius > 0,
+          f'model.branch_crop_radius must be > 0 metres, got {m.branch_crop_radius}')
   require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
   require(d.num_points >= m.num_clusters,
           f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '
           'every cluster center is one of the input points')
+  require(config.inference.num_samples >= 0,
+          f'inference.num_samples must be >= 0 (0: model.num_samples), '
+          f'got {config.inference.num_samples}')
+  require(config.inference.draws >= 1,
+          f'inference.draws must be >= 1, got {config.inference.draws}')
   require(t.batch_size >= 1, f'train.batch_size must be >= 1, got {t.batch_size}')
   require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
   require(t.num_steps >= 1, f'train.num_steps must be >= 1, got {t.num_steps}')
@@ -109,9 +125,7 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
 
 
 def create_model(config: ml_collections.ConfigDict) -> network.FeatureNet:
-  return network.FeatureNet(descriptor_dim=config.model.descriptor_dim,
-                            use_orientation=config.model.get('use_orientation', True),
-                            bn_momentum=config.model.bn_momentum)
+  return network.create(config.model)
 
 
 def create_optimizer(config: ml_collections.ConfigDict) -> optax.GradientTransformation:
@@ -259,8 +273,11 @@ def _check_finite(pending: list[tuple[int, dict]], ckpt: checkpoint.Checkpointer
           + (f'step {last} in {ckpt.directory}' if last is not None else 'none yet'))
 
 
-# Triplet-loss keys added after runs were written, with the value those runs used.
-ADDED_MODEL_KEYS = {'triplet_hinge': 'cluster', 'attention_normalization': 'softmax'}
+# Model keys added after runs were written, with the value those runs used.
+ADDED_MODEL_KEYS = {'triplet_hinge': 'cluster', 'attention_normalization': 'softmax',
+                    'self_rotation': 'gaussian', 'orientation_head': 'mlp',
+                    'branch_dropout': 0.0, 'branch_crop_shift': 0.0, 'branch_crop_radius': 20.0}
+TRIPLET_ONLY_KEYS = ('triplet_hinge', 'attention_normalization')
 
 
 def check_resumable(config: ml_collections.ConfigDict, stored: dict, directory: str) -> None:
@@ -269,7 +286,7 @@ def check_resumable(config: ml_collections.ConfigDict, stored: dict, directory: 
   for section in ('model',):
     for key, value in current[section].items():
       if key not in stored.get(section, {}) and key in ADDED_MODEL_KEYS:
-        if stored.get('objective') != 'triplet':
+        if key in TRIPLET_ONLY_KEYS and stored.get('objective') != 'triplet':
           continue   # a triplet-only setting that the stored run never used
         was = ADDED_MODEL_KEYS[key]
       else:

@@ -150,3 +150,61 @@ def plot_keypoints(points: np.ndarray, keypoints: dict, path: str | os.PathLike,
     ax.set_title(f'{label}: {len(kp)} keypoints')
   fig.savefig(path, dpi=110, bbox_inches='tight')
   plt.close(fig)
+
+
+def plot_learning_curve(records: list[dict], path: str | os.PathLike,
+                        title: str = 'Registration success during training') -> None:
+  """One panel per test set: success (%) of each run's checkpoints against the training
+  step (solid) and its precision at 1 m (dotted), baseline rows as horizontal lines.
+
+  records: rows of `learning_curve.COLUMNS` (strings, as read back from the CSV).
+  """
+  plt = _pyplot()
+  sets = list(dict.fromkeys(r['set'] for r in records))
+  runs = list(dict.fromkeys(r['run'] for r in records if r['run']))
+  fig, axes = plt.subplots(1, len(sets), figsize=(4.6 * len(sets), 4.0), squeeze=False)
+  for ax, name in zip(axes[0], sets):
+    for i, run in enumerate(runs):
+      pts = sorted((int(r['step']), float(r['success']), float(r['precision_1m']))
+                   for r in records if r['set'] == name and r['run'] == run)
+      if pts:
+        steps, success, prec = zip(*pts)
+        ax.plot(steps, success, 'o-', color=f'C{i}', lw=1.6, label=f'{run}: success')
+        ax.plot(steps, prec, 's:', color=f'C{i}', lw=1.0, label=f'{run}: precision @ 1 m')
+    for i, r in enumerate(r for r in records if r['set'] == name and not r['run']):
+      color = f'C{len(runs) + i}'
+      ax.axhline(float(r['success']), color=color, ls='--', lw=1.2, label=f'{r["row"]}: success')
+      ax.axhline(float(r['precision_1m']), color=color, ls=':', lw=1.0,
+                 label=f'{r["row"]}: precision @ 1 m')
+    ax.set_xscale('log')
+    ax.set_ylim(0, 100)
+    ax.set_xlabel('training step')
+    ax.set_ylabel('%')
+    ax.set_title(name)
+    ax.grid(alpha=0.3, which='both')
+    ax.legend(loc='center right', fontsize=6)
+  fig.suptitle(title)
+  fig.savefig(path, dpi=120, bbox_inches='tight')
+  plt.close(fig)
+
+
+def plot_rotation_sweep(sweeps: dict, path: str | os.PathLike) -> None:
+  """sweeps {checkpoint name: `orientation.rotation_sweep` output}: self-match rate and
+  orientation error against the turn angle."""
+  plt = _pyplot()
+  fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+  for name, sweep in sweeps.items():
+    angle = [r['angle_deg'] for r in sweep]
+    ax1.plot(angle, [100 * r['self_match_rate'] for r in sweep], 'o-', label=name)
+    ax2.plot(angle, [r['orientation_error_deg'] for r in sweep], 'o-', label=name)
+  ax1.set(xlabel='turn about z (°)', ylabel='self-match rate (%)', ylim=(0, 100),
+          title='turned cluster matches itself')
+  ax2.set(xlabel='turn about z (°)', ylabel='median orientation error (°)', ylim=(0, 180),
+          title='orientation follows the turn')
+  for ax in (ax1, ax2):
+    ax.set_xlim(0, 360)
+    ax.set_xticks(range(0, 361, 45))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+  fig.savefig(path, dpi=120, bbox_inches='tight')
+  plt.close(fig)

@@ -12,8 +12,8 @@ import pytest
 
 from ssd_jax import geometry, inference, train
 from ssd_jax.data import benchmarks, clusters, io
-from ssd_jax.evaluation import (descriptor_matching, features, precision, registration,
-                                repeatability)
+from ssd_jax.evaluation import (descriptor_matching, features, learning_curve, precision,
+                                registration, repeatability)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -232,3 +232,65 @@ def test_descriptor_matching_cli_names_a_truncated_cluster(tmp_path):
                        text=True, timeout=300)
   assert run.returncode != 0 and 'Traceback' not in run.stderr
   assert '0_1.bin' in run.stderr and 'truncated' in run.stderr
+
+
+# ---- learning curve ------------------------------------------------------------------------
+
+def test_learning_curve_rows_resume_and_cli(synthetic_root, tiny_checkpoint, tmp_path):
+  pairs = benchmarks.read_registration_set(synthetic_root / 'test_oxford')[:2]
+  csv_path = tmp_path / 'curve.csv'
+  loaded = []
+
+  def load(run, step):
+    loaded.append((run, step))
+    return inference.load(tiny_checkpoint, step)
+
+  checkpoints = [('tiny', 2), ('tiny', 4)]
+  records = learning_curve.run({'oxford': pairs}, checkpoints, load, csv_path, progress=False)
+  assert [(r['run'], r['step'], r['row']) for r in records] == [
+      ('', '', 'iss+fpfh'), ('tiny', '2', 'iss+ours'), ('tiny', '4', 'iss+ours')]
+  assert loaded == checkpoints
+  # The FPFH row is the registration table's row on the same pairs.
+  store = features.FeatureStore({}, seed=0)
+  res = registration.register_pairs(pairs, ['iss+fpfh'], store, progress=False)['iss+fpfh']
+  assert float(records[0]['success']) == pytest.approx(100 * np.mean([r['success'] for r in res]))
+  assert float(records[0]['trials']) == pytest.approx(np.mean([r['trials'] for r in res]))
+  yaws = [learning_curve.yaw_bin(learning_curve.relative_yaw_deg(p.transform)) for p in pairs]
+  for b, (lo, hi) in enumerate(learning_curve.YAW_BINS):
+    assert int(records[0][f'pairs_yaw_{lo}_{hi}']) == yaws.count(b)
+  # The learned row is the registration table's row of that checkpoint.
+  store.models['tiny4'] = inference.load(tiny_checkpoint, 4)
+  res = registration.register_pairs(pairs, ['iss+tiny4'], store, progress=False)['iss+tiny4']
+  assert float(records[2]['trials']) == pytest.approx(np.mean([r['trials'] for r in res]))
+  # Finished cells are read back, not recomputed.
+  again = learning_curve.run({'oxford': pairs}, checkpoints, load, csv_path, progress=False)
+  assert again == records and loaded == checkpoints
+
+  out = tmp_path / 'cli'
+  run = subprocess.run(
+      [sys.executable, '-m', 'experiments.learning_curve', f'--run=tiny={tiny_checkpoint}',
+       f'--out={out}', '--steps=4', f'--set=oxford={synthetic_root / "test_oxford"}',
+       '--fpfh_max_nn=50'], cwd=ROOT, capture_output=True, text=True, timeout=900)
+  assert run.returncode == 0, run.stderr[-3000:]
+  assert (out / 'learning_curve.png').stat().st_size > 10_000
+  assert '| oxford | tiny | 4 | iss+ours |' in (out / 'learning_curve.md').read_text()
+  bad = subprocess.run(
+      [sys.executable, '-m', 'experiments.learning_curve', f'--run={tiny_checkpoint}',
+       f'--out={out}', '--steps=3'], cwd=ROOT, capture_output=True, text=True, timeout=300)
+  assert bad.returncode != 0 and 'no checkpoint at steps [3]' in bad.stderr
+  assert 'Traceback' not in bad.stderr
+
+
+def test_rotation_sweep_separates_equivariant_and_paper_heads(tiny_checkpoint, tmp_path):
+  from ssd_jax import pretrained  # pylint: disable=g-import-not-at-top
+  from ssd_jax.evaluation import orientation  # pylint: disable=g-import-not-at-top
+  rng = np.random.default_rng(0)
+  points = (rng.uniform(-10, 10, (3000, 3)) * np.array([1, 1, 0.2])).astype(np.float32)
+  centers = points[:64]
+  paper = orientation.rotation_sweep(inference.load(tiny_checkpoint), points, centers,
+                                     [0, 90, 180])
+  assert paper[0]['self_match_rate'] == 1.0 and paper[0]['descriptor_distance'] < 1e-5
+  assert paper[2]['orientation_error_deg'] > 20 and paper[2]['self_match_rate'] < 0.9
+  ours = orientation.rotation_sweep(pretrained.load('ours'), points, centers, [0, 90, 180])
+  for r in ours:
+    assert r['orientation_error_deg'] < 0.1 and r['self_match_rate'] == 1.0, r

@@ -145,3 +145,39 @@ def test_detector_can_learn_to_turn_with_the_cluster():
   after = median_error_deg(params, batch_stats)
   assert before > 60, before
   assert after < 35, (before, after)
+
+
+def _outputs_before_and_after_a_turn(head, theta):
+  """FeatureNet(orientation_head=head) on 32 clusters of a random cloud, and on the same
+  clusters of the cloud turned by theta about z -> ((desc, att, angle), (... turned))."""
+  rng = np.random.default_rng(1)
+  cloud = jnp.asarray(rng.uniform(-6, 6, (1500, 3)) * np.array([1, 1, 0.3]), jnp.float32)
+  centers = cloud[:32]
+  model = network.FeatureNet(orientation_head=head)
+  clusters = _clusters_of(cloud, centers)
+  variables = model.init(jax.random.key(0), clusters)
+  rot = geometry.rotation_z(jnp.float32(theta))
+  return (model.apply(variables, clusters),
+          model.apply(variables, _clusters_of(cloud @ rot.T, centers @ rot.T)))
+
+
+@pytest.mark.parametrize('theta', [0.5, 1.6, 2.9, -2.4, np.pi])
+def test_equivariant_head_turns_with_the_cluster_all_the_way_round(theta):
+  (desc, att, angle), (desc_r, att_r, angle_r) = _outputs_before_and_after_a_turn(
+      'equivariant', theta)
+  np.testing.assert_allclose(orientation.orientation_error_deg(angle, angle_r, theta), 0,
+                             atol=1e-3)
+  np.testing.assert_allclose(desc_r, desc, atol=5e-5)
+  np.testing.assert_allclose(att_r, att, rtol=1e-5)
+
+
+def test_paper_head_is_not_equivariant_by_construction():
+  """The control: 3DFeat-Net's head, untrained, does not follow a half turn."""
+  (desc, _, angle), (desc_r, _, angle_r) = _outputs_before_and_after_a_turn('mlp', np.pi)
+  assert np.median(orientation.orientation_error_deg(angle, angle_r, np.pi)) > 10
+  assert float(jnp.max(jnp.abs(desc_r - desc))) > 1e-2
+
+
+def test_unknown_orientation_head_is_a_clear_error():
+  with pytest.raises(ValueError, match='orientation_head must be one of'):
+    network.FeatureNet(orientation_head='pca').init(jax.random.key(0), jnp.zeros((1, 4, 8, 3)))

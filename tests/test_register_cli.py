@@ -56,8 +56,22 @@ def test_register_cli_errors(tiny_set, tmp_path):
   assert out.returncode != 0 and 'nope.bin: no such file' in out.stderr
   assert 'Traceback' not in out.stderr
   out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={cloud}',
-             '--descriptor=learned')
-  assert 'error: learned keypoints/descriptors need --checkpoint' in out.stderr
+             '--descriptor=learned', f'--checkpoint={tmp_path / "none"}')
+  assert out.returncode != 0 and 'none: no such checkpoint directory' in out.stderr
+  assert 'Traceback' not in out.stderr
+
+
+def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
+  """No --checkpoint: the shipped `ours` model describes, and the pair registers."""
+  folder = tiny_set / 'test_kitti' / '00'
+  pair = benchmarks.read_registration_set(folder)[0]
+  out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
+             '--descriptor=learned', f'--groundtruth={folder / "groundtruths.txt"}',
+             f'--json={tmp_path / "r.json"}')
+  assert out.returncode == 0, out.stderr[-3000:]
+  result = json.loads((tmp_path / 'r.json').read_text())
+  assert result['descriptor'] == 'learned' and result['model'] == 'ours'
+  assert result['errors']['success'], result
 
 
 def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):
@@ -74,18 +88,19 @@ def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):
   assert (tmp_path / 'registration.csv').read_text().count('\n') == 3
 
 
-@pytest.mark.parametrize('names', [('oxford_270', 'oxford_456'),
-                                   ('kitti_00_001554', 'kitti_00_004534')])
-def test_register_cli_on_real_pairs(names, tmp_path):
+@pytest.mark.parametrize('names,descriptor', [
+    (('oxford_270', 'oxford_456'), 'learned'), (('kitti_00_001554', 'kitti_00_004534'), 'learned'),
+    (('kitti_00_001554', 'kitti_00_004534'), 'fpfh')])
+def test_register_cli_on_real_pairs(names, descriptor, tmp_path):
   """The real pairs have no ground truth: the RANSAC pose must be a success (RTE < 2 m,
-  RRE < 5°) against the ICP-refined pose, and most points of cloud 2 must land on cloud 1."""
+  RRE < 5°) against the ICP-refined pose, and most points of cloud 2 must land on cloud 1.
+  The learned rows use the shipped model."""
   from tests.conftest import shared_path  # pylint: disable=g-import-not-at-top
   c1, c2 = (shared_path('example', f'{n}.bin') for n in names)
-  out = _run('experiments.register', f'--cloud1={c1}', f'--cloud2={c2}', '--fpfh_max_nn=200',
-             f'--json={tmp_path / "ransac.json"}')
+  common = [f'--cloud1={c1}', f'--cloud2={c2}', f'--descriptor={descriptor}', '--fpfh_max_nn=200']
+  out = _run('experiments.register', *common, f'--json={tmp_path / "ransac.json"}')
   assert out.returncode == 0, out.stderr[-3000:]
-  out = _run('experiments.register', f'--cloud1={c1}', f'--cloud2={c2}', '--fpfh_max_nn=200',
-             '--icp', f'--json={tmp_path / "icp.json"}')
+  out = _run('experiments.register', *common, '--icp', f'--json={tmp_path / "icp.json"}')
   assert out.returncode == 0, out.stderr[-3000:]
   ransac_t = np.array(json.loads((tmp_path / 'ransac.json').read_text())['T_12'])
   icp = json.loads((tmp_path / 'icp.json').read_text())

@@ -34,7 +34,21 @@ def _step_fn(config, max_traces=None):
   return jax.jit(fn, donate_argnums=0)
 
 
-def test_train_step_compiles_once_and_is_deterministic(tiny_config):
+def _robust(config):
+  """The options of configs/cpu_robust.py on a tiny config."""
+  config.model.self_rotation = 'uniform'
+  config.model.orientation_head = 'equivariant'
+  config.model.branch_dropout = 0.5
+  config.model.branch_crop_shift = 2.0
+  config.model.branch_crop_radius = 7.0
+  config.model.independent_centers = True
+  return config
+
+
+@pytest.mark.parametrize('variant', ['paper', 'robust'])
+def test_train_step_compiles_once_and_is_deterministic(tiny_config, variant):
+  if variant == 'robust':
+    tiny_config = _robust(tiny_config)
   chex.clear_trace_counter()
   step = _step_fn(tiny_config, max_traces=1)
   runs = []
@@ -83,7 +97,12 @@ def test_config_errors_name_the_value(tiny_config):
            ('data.num_points', 32, r'data.num_points \(32\) must be >= model.num_clusters'),
            ('model.radius', 0.0, 'radius must be > 0'),
            ('model.triplet_hinge', 'anchor', "triplet_hinge must be one of .*'anchor'"),
-           ('model.attention_normalization', 'max', 'attention_normalization must be one of')]
+           ('model.attention_normalization', 'max', 'attention_normalization must be one of'),
+           ('model.self_rotation', 'vonmises', "self_rotation must be one of .*'vonmises'"),
+           ('model.orientation_head', 'pca', 'orientation_head must be one of'),
+           ('model.branch_dropout', 1.0, r'branch_dropout must be in \[0, 0.9\]'),
+           ('model.branch_crop_shift', -1.0, 'branch_crop_shift must be >= 0'),
+           ('model.branch_crop_radius', 0.0, 'branch_crop_radius must be > 0')]
   for field, value, message in cases:
     config = tiny_config.copy_and_resolve_references()
     section, name = field.split('.')
@@ -258,6 +277,10 @@ def test_runs_from_before_a_model_key_existed_resume_with_its_old_value(tiny_con
     train.check_resumable(tiny_config, stored, 'old_run')
   stored['objective'] = 'self_supervised'    # never used the triplet loss: nothing to refuse
   train.check_resumable(tiny_config, stored, 'old_run')
+  # A self-supervised run from before the full-circle options drew Gaussian angles.
+  tiny_config.model.self_rotation = 'uniform'
+  with pytest.raises(train.ConfigError, match="model.self_rotation='gaussian'"):
+    train.check_resumable(tiny_config, stored, 'old_run')
 
 
 def test_metrics_writer_keeps_what_the_checkpoint_covers(tmp_path):

@@ -17,13 +17,15 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ssd_jax import pretrained
 from ssd_jax.data import io, pipeline as data_pipeline
 from ssd_jax.registration import features as features_lib, pipeline
 
 BUILTIN_KEYPOINTS = ('iss', 'random')
 BUILTIN_DESCRIPTORS = ('fpfh',)
 NAMES = {'iss': 'ISS', 'random': 'random', 'fpfh': 'FPFH', 'ours': 'Ours',
-         'feat3dnet': '3DFeat-Net', 'ours_detector': 'Ours (self-sup. detector)'}
+         'feat3dnet': '3DFeat-Net', 'ours_detector': 'Ours (self-sup. detector)',
+         'ours_run': 'Ours (this run)'}
 
 
 def split_row(row: str) -> tuple[str, str]:
@@ -50,8 +52,8 @@ def model_names(rows: Sequence[str]) -> list[str]:
 
 
 def load_models(checkpoints: Mapping[str, str], names: Sequence[str]):
-  """-> ({name: inference.Model}, {name: why it is missing})."""
-  from ssd_jax import inference  # pylint: disable=g-import-not-at-top
+  """checkpoints {name: shipped model name, export folder or training run} ->
+  ({name: inference.Model}, {name: why it is missing})."""
   models, missing = {}, {}
   for name in names:
     path = checkpoints.get(name)
@@ -59,7 +61,7 @@ def load_models(checkpoints: Mapping[str, str], names: Sequence[str]):
       missing[name] = f'no checkpoint configured for {name!r}'
       continue
     try:
-      models[name] = inference.load(path)
+      models[name] = pretrained.load(path)
     except FileNotFoundError as e:
       missing[name] = str(e)
   return models, missing

@@ -40,3 +40,31 @@ def summarize(errors: np.ndarray, within_deg: float = 15.0) -> dict[str, float]:
   """-> {'median_deg', 'within'}: the median error and the share below `within_deg`
   (0.083 for errors uniform on [0, 180] degrees)."""
   return {'median_deg': float(np.median(errors)), 'within': float(np.mean(errors < within_deg))}
+
+
+def rotation_sweep(model: inference.Model, points: np.ndarray, centers: np.ndarray,
+                   angles_deg: Sequence[float]) -> list[dict[str, float]]:
+  """Turn the whole cloud about z by each angle and compare every cluster with itself.
+
+  points [N, 3], centers [K, 3] metres. The turned cloud keeps its point order, so
+  each ball holds the same points: what changes is only what the network does with a
+  turned cluster. Per angle: the median orientation error (degrees; 0 = the head turns
+  with the cluster), the median descriptor distance between a cluster and its turned
+  self, and the self-match rate: the share of turned clusters whose nearest descriptor
+  among the unturned ones is their own (1 = matching survives the turn).
+  """
+  base = inference.describe(model, points, centers)
+  _, theta = inference.detect_at(model, points, centers)
+  out = []
+  for deg in angles_deg:
+    phi = np.deg2rad(deg)
+    rz = np.asarray(geometry.rotation_z(np.float32(phi)), np.float32)
+    turned_pts, turned_ctr = points @ rz.T, centers @ rz.T
+    desc = inference.describe(model, turned_pts, turned_ctr)
+    _, turned = inference.detect_at(model, turned_pts, turned_ctr)
+    d2 = np.sum((desc[:, None, :] - base[None, :, :]) ** 2, -1)
+    out.append({'angle_deg': float(deg),
+                'orientation_error_deg': float(np.median(orientation_error_deg(theta, turned, phi))),
+                'descriptor_distance': float(np.median(np.sqrt(np.diag(d2)))),
+                'self_match_rate': float(np.mean(np.argmin(d2, 1) == np.arange(len(centers))))})
+  return out

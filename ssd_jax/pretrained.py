@@ -1,0 +1,98 @@
+"""Pretrained models: small exported weights shipped with the package, and one loader
+for every way a user names a model.
+
+An export is a folder with three files:
+
+    config.json      the training config (the network is rebuilt from its `model`)
+    weights.msgpack  {'params', 'batch_stats'} (flax.serialization), no optimizer state
+    MODEL_CARD.md    data, config, steps, wall time, machine, command, results
+
+The shipped ones live in `ssd_jax/weights/<name>/` and are named by `SHIPPED`:
+
+    model = pretrained.load('ours')              # shipped: the best self-supervised model
+    model = pretrained.load('runs/cpu_robust')   # a training run (its latest checkpoint)
+    model = pretrained.load('exports/mine')      # an export folder
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+
+import flax.serialization
+import jax
+import ml_collections
+
+from ssd_jax import inference, network
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / 'weights'
+SHIPPED = {
+    'ours': 'self-supervised descriptor (configs/cpu_robust.py)',
+    'ours_detector': 'self-supervised descriptor and detector (configs/cpu_robust_detector.py)',
+    'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/3dfeatnet_small_varied.py)',
+}
+CONFIG_FILE, WEIGHTS_FILE, CARD_FILE = 'config.json', 'weights.msgpack', 'MODEL_CARD.md'
+
+
+def is_export(path: str | os.PathLike) -> bool:
+  return (Path(path) / CONFIG_FILE).is_file() and (Path(path) / WEIGHTS_FILE).is_file()
+
+
+def export(model: inference.Model, config: ml_collections.ConfigDict,
+           out: str | os.PathLike, card: str = '') -> Path:
+  """Write `model` (weights and BatchNorm statistics) and its config to folder `out`."""
+  out = Path(out)
+  out.mkdir(parents=True, exist_ok=True)
+  record = {'config': config.to_dict(), 'step': model.step}
+  (out / CONFIG_FILE).write_text(json.dumps(record, indent=1, default=list) + '\n')
+  (out / WEIGHTS_FILE).write_bytes(flax.serialization.to_bytes(
+      {'params': model.variables['params'], 'batch_stats': model.variables['batch_stats']}))
+  if card:
+    (out / CARD_FILE).write_text(card)
+  return out
+
+
+def load_export(path: str | os.PathLike) -> inference.Model:
+  """An export folder -> `inference.Model`, or a clear error for a damaged one."""
+  path = Path(path)
+  try:
+    record = json.loads((path / CONFIG_FILE).read_text())
+    config = ml_collections.ConfigDict(record['config'])
+    net = network.create(config.model)
+  except (OSError, ValueError, KeyError, AttributeError) as e:
+    raise ValueError(f'{path / CONFIG_FILE}: not a readable model config ({e})') from None
+  template = jax.eval_shape(lambda: net.init(
+      jax.random.key(0), jax.numpy.zeros((1, 1, config.model.num_samples, 3)), train=False))
+  template = jax.tree.map(lambda s: jax.numpy.zeros(s.shape, s.dtype), template)
+  try:
+    variables = flax.serialization.from_bytes(template, (path / WEIGHTS_FILE).read_bytes())
+  except Exception as e:  # pylint: disable=broad-except  (msgpack raises many kinds)
+    raise ValueError(f'{path / WEIGHTS_FILE}: damaged or not weights of this network '
+                     f'({type(e).__name__}: {e})') from None
+  model = inference.Model.from_config(config, variables)
+  return dataclasses.replace(model, step=record.get('step'))
+
+
+def resolve(name_or_path: str | os.PathLike) -> str:
+  """A shipped name -> its folder; anything else is returned unchanged."""
+  return str(WEIGHTS_DIR / name_or_path) if str(name_or_path) in SHIPPED else str(name_or_path)
+
+
+def load(name_or_path: str | os.PathLike, step: int | None = None) -> inference.Model:
+  """A shipped name (`SHIPPED`), an export folder or a training run -> `inference.Model`."""
+  path = resolve(name_or_path)
+  if str(name_or_path) in SHIPPED and not is_export(path):
+    raise FileNotFoundError(f'the shipped model {name_or_path!r} is not in {path}')
+  if is_export(path):
+    if step is not None:
+      raise ValueError(f'{path} is an export of one step; --step applies to training runs')
+    return load_export(path)
+  return inference.load(path, step)
+
+
+def load_config(name_or_path: str | os.PathLike) -> ml_collections.ConfigDict:
+  """The training config of a shipped name or export folder."""
+  return ml_collections.ConfigDict(
+      json.loads((Path(resolve(name_or_path)) / CONFIG_FILE).read_text())['config'])

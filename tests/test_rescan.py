@@ -1,0 +1,37 @@
+"""Re-scan pairs from single real scans (ssd_jax.data.rescan)."""
+
+import numpy as np
+from scipy import spatial
+
+from ssd_jax.data import benchmarks, io, rescan
+from ssd_jax.evaluation import learning_curve
+from tests.conftest import shared_path
+
+
+def test_rescan_pair_is_a_different_sampling_that_the_transform_aligns():
+  points = io.read_cloud(shared_path('example', 'oxford_270.bin'))
+  cloud1, cloud2, t12 = rescan.rescan_pair(np.random.default_rng(0), points, 130.0)
+  assert abs(rescan.yaw_deg(t12) - 130.0) < 1e-9
+  assert 2.0 <= np.linalg.norm(t12[:2, 3]) <= 10.0 and t12[2, 3] == 0
+  moved = cloud2 @ t12[:3, :3].T + t12[:3, 3]
+  dist, _ = spatial.cKDTree(cloud1).query(moved)
+  assert np.median(dist) < 0.1                       # the same surfaces ...
+  assert np.mean(dist < 1e-3) < 0.01                 # ... but no shared points
+  assert 0.2 * len(cloud1) < len(cloud2) < 0.9 * len(cloud1)   # the other view sees less
+  # Without the transform the clouds do not line up (the test can fail).
+  assert np.median(spatial.cKDTree(cloud1).query(cloud2)[0]) > 0.3
+
+
+def test_rescan_set_is_deterministic_and_covers_every_yaw_bin(tmp_path):
+  sources = [shared_path('kitti_object_velodyne', '000000.bin')]
+  rows = rescan.make_rescan_set(sources, tmp_path / 'a', seed=3, pairs_per_cloud=8)
+  rescan.make_rescan_set(sources, tmp_path / 'b', seed=3, pairs_per_cloud=8)
+  assert (tmp_path / 'a' / 'groundtruths.txt').read_text() == \
+      (tmp_path / 'b' / 'groundtruths.txt').read_text()
+  assert (tmp_path / 'a' / '000003.bin').read_bytes() == (tmp_path / 'b' / '000003.bin').read_bytes()
+  yaws = np.array([r['yaw_deg'] for r in rows])
+  np.testing.assert_array_equal(np.sort(np.floor((yaws + 180) / 45)), np.arange(8))
+  pairs = benchmarks.read_registration_set(tmp_path / 'a')
+  assert len(pairs) == 8
+  bins = [learning_curve.yaw_bin(learning_curve.relative_yaw_deg(p.transform)) for p in pairs]
+  assert sorted(bins) == [0, 0, 1, 1, 2, 2, 3, 3]
