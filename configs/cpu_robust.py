@@ -10,8 +10,15 @@ construction (`network.EquivariantDetector`), and two different samplings of the
 cloud in the two branches (up to half of each branch's points dropped, each branch
 cropped to 16 m around a sensor offset by up to 4 m, centers sampled independently).
 At inference each keypoint's descriptor averages 4 samplings of 64 points of its ball.
-The loss is still the paper's ||I - R R_gt^T||_F of the CF rotation. docs/results.md
-has the learning curve and the ablation this config comes from.
+The loss is still the paper's ||I - R R_gt^T||_F of the CF rotation.
+
+Expected (seed 0, 2-core CPU VM, measured 2026-12-01; ~7 steps/s alone, so ~30
+minutes): at 12,000 steps ISS + ours registers 95.3 % of the KITTI-style and 75.5 % of
+the Oxford-style synthetic test pairs and 96.2 % of the real re-scan pairs
+(experiments.learning_curve; ISS + FPFH: 100 / 64.2 / 88.8 %). The training loss stays
+near 0.7 (CF rotation error ~30-40 degrees over turns of up to 180 degrees between two
+different samplings); registration keeps improving regardless. This run is the shipped
+`ours` model; docs/results.md has its learning curve and the ablation.
 """
 
 from configs import cpu_small

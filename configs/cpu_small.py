@@ -1,6 +1,8 @@
-"""A small self-supervised config that learns within minutes on 2 CPU cores.
+"""The paper's self-supervised setting at a size that learns within minutes on 2 CPU
+cores (Gaussian self-rotation, 3DFeat-Net's orientation head, both branches the same
+points). configs/cpu_robust.py adds this project's full-circle remedies.
 
-Command (the README's main job; the synthetic set comes first):
+Command (the synthetic set comes first):
 
     python -m experiments.make_synthetic --config=configs/synthetic_small.py \
         --out=data_cache/synthetic_small
