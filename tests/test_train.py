@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from configs import cpu_robust
 from ssd_jax import train
 from ssd_jax.data import pipeline
 from tests.conftest import shared_path
@@ -35,13 +36,12 @@ def _step_fn(config, max_traces=None):
 
 
 def _robust(config):
-  """The options of configs/cpu_robust.py on a tiny config."""
-  config.model.self_rotation = 'uniform'
-  config.model.orientation_head = 'equivariant'
-  config.model.branch_dropout = 0.5
-  config.model.branch_crop_shift = 2.0
-  config.model.branch_crop_radius = 7.0
-  config.model.independent_centers = True
+  """The options of configs/cpu_robust.py on a tiny config (its clouds span 8 m, so the
+  crop shrinks with them)."""
+  robust = cpu_robust.get_config().model
+  for key in ('self_rotation', 'orientation_head', 'branch_dropout', 'independent_centers'):
+    config.model[key] = robust[key]
+  config.model.branch_crop_shift, config.model.branch_crop_radius = 2.0, 7.0
   return config
 
 
