@@ -109,3 +109,23 @@ def test_load_restores_a_training_run(tiny_config, tmp_path):
                                 inference.describe(direct, pts, pts[:20]))
   with pytest.raises(FileNotFoundError, match='no such checkpoint directory'):
     inference.load(tmp_path / 'nothing')
+
+
+def test_descriptors_averaged_over_draws(model):
+  import dataclasses  # pylint: disable=g-import-not-at-top
+  rng = np.random.default_rng(7)
+  pts = _cloud(rng, 4000)
+  kp = pts[:40]
+  single = inference.describe(model, pts, kp)
+  # Draw 0 is the single-sampling order; more draws average other samplings of each ball.
+  draws = [inference.describe(model, pts, kp, seed=s) for s in (0, (0, 1), (0, 2))]
+  averaged = inference.describe(dataclasses.replace(model, draws=3), pts, kp)
+  mean = np.sum(draws, axis=0)
+  np.testing.assert_allclose(averaged, mean / np.linalg.norm(mean, axis=1, keepdims=True),
+                             atol=1e-5)
+  np.testing.assert_allclose(np.linalg.norm(averaged, axis=1), 1.0, atol=1e-5)
+  assert float(np.abs(averaged - single).max()) > 1e-3        # the draws differ
+  np.testing.assert_array_equal(averaged,
+                                inference.describe(dataclasses.replace(model, draws=3), pts, kp))
+  with pytest.raises(ValueError, match='draws must be >= 1'):
+    inference.describe(dataclasses.replace(model, draws=0), pts, kp)
