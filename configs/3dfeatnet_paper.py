@@ -1,4 +1,4 @@
-"""3DFeat-Net's weakly supervised training (the baseline, REFERENCE §3), two stages.
+"""3DFeat-Net's weakly supervised training (the baseline, docs/method.md §5), two stages.
 
 Commands (Oxford RobotCar as processed by 3DFeat-Net):
 

@@ -1,4 +1,4 @@
-"""Descriptor matching (paper Table III and its text, REFERENCE §8).
+"""Descriptor matching (paper Table III and its text, docs/method.md §4).
 
 Command (the small synthetic cluster set, after the README's main job):
 

@@ -1,4 +1,4 @@
-"""The paper's self-supervised training settings (REFERENCE §2).
+"""The paper's self-supervised training settings (docs/method.md §2).
 
 Command (Oxford RobotCar as processed by 3DFeat-Net):
 
@@ -9,7 +9,7 @@ Batch 6 x 4,096 points, 512 FPS clusters of 64 points within 2 m, 32-D
 descriptors, alpha 1, Adam 1e-3 for 72,500 steps (3DFeat-Net's 20 epochs),
 self-rotation phi ~ N(0, 0.6^2) rad about z, jitter sigma 0.01 m. The paper
 saves this model at step 72,500; its CF rotation error on held-out scans falls
-below 1 degree within the first few thousand steps (REFERENCE §10).
+below 1 degree within the first few thousand steps (docs/benchmarks.md).
 """
 
 import ml_collections
@@ -56,10 +56,10 @@ def get_config() -> ml_collections.ConfigDict:
   model.bn_momentum = 0.99
   model.use_orientation = True   # False: 3DFeat-Net's descriptor pre-training (no detector)
   model.attention_in_cf = False  # True: the self-supervised detector, w_ij * a_i * b_j in CF
-  # Triplet objective only (REFERENCE §3):
+  # Triplet objective only (docs/method.md §5):
   model.margin = 0.2
   # One hinge on the attention-weighted sums (cloud, 3DFeat-Net's released code) or
-  # one per anchor cluster (cluster); attention normalised by a softmax (REFERENCE §3)
+  # one per anchor cluster (cluster); attention normalised by a softmax (docs/method.md §5)
   # or by its sum (the released code's softplus / sum).
   model.triplet_hinge = 'cloud'              # cloud | cluster
   model.attention_normalization = 'softmax'  # softmax | sum

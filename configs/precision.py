@@ -1,4 +1,4 @@
-"""Precision test (paper Fig. 4, REFERENCE §7) for every keypoint x descriptor row.
+"""Precision test (paper Fig. 4, docs/method.md §4) for every keypoint x descriptor row.
 
 Command (the small synthetic Oxford-style set, after the README's main job):
 

@@ -1,4 +1,4 @@
-"""Geometric registration benchmark (paper Tables I and II, REFERENCE §4-6).
+"""Geometric registration benchmark (paper Tables I and II, docs/method.md §4).
 
 Command (the small synthetic set, after the README's main job):
 

@@ -48,7 +48,7 @@ def get_config() -> ml_collections.ConfigDict:
   train.positive_radius = 10.0
   train.non_negative_radius = 50.0
 
-  # KITTI-style test set (REFERENCE §9): a cloud every ~10 m, pairs < 10 m apart.
+  # KITTI-style test set (docs/method.md §6): a cloud every ~10 m, pairs < 10 m apart.
   config.test_kitti = kitti = ml_collections.ConfigDict()
   kitti.num_scenes = 4
   kitti.spacing = 10.0
@@ -67,13 +67,13 @@ def get_config() -> ml_collections.ConfigDict:
   # then a random subset: real models have a near-regular 0.2 m spacing and no repeats.
   oxford.voxel_size = 0.2
 
-  # Descriptor-matching cluster pairs (REFERENCE §8).
+  # Descriptor-matching cluster pairs (docs/method.md §4).
   config.clusters = clusters = ml_collections.ConfigDict()
   clusters.num_scenes = 2
   clusters.spacing = 5.0
   clusters.num_pairs = 30_000     # the paper's count
   clusters.radius = 4.0
-  # 'random': centres at random scan points, as the paper's 30,000 pairs (REFERENCE §8,
+  # 'random': centres at random scan points, as the paper's 30,000 pairs (docs/method.md §4,
   # which its ISS-filtered variant then thins out); 'iss': centres at ISS keypoints.
   clusters.centers = 'random'
   clusters.positive_max_distance = 10.0

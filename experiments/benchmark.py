@@ -6,7 +6,7 @@ r"""Training-step benchmark: speed, achieved FLOP rate, compile time and peak me
 Prints one table row per config plus this machine's JAX fp32 matmul rate
 (2048 x 2048, jit, median) as the ceiling. FLOPs are counted analytically
 over the dense layers (training = 3 x forward: forward, input and weight
-gradients), as in REFERENCE §10; XLA's own count of the compiled step is
+gradients), as in docs/benchmarks.md; XLA's own count of the compiled step is
 shown beside it. Each config runs in a fresh subprocess so its peak RSS is
 its own. A breakdown of the paper config's step (FPS, ball query, network)
 shows where the time goes.

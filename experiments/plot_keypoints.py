@@ -3,7 +3,7 @@ r"""Paper Fig. 3: ISS and learned keypoints as red dots on the same cloud, top v
     python -m experiments.plot_keypoints --cloud=A.bin --out=keypoints.png \
         [--sources=iss,learned --checkpoint=runs/feat3dnet_small_varied]
 
-`learned` keypoints are the checkpoint's detector (attention + NMS, REFERENCE §4);
+`learned` keypoints are the checkpoint's detector (attention + NMS, docs/method.md §4);
 it needs a checkpoint whose attention head was trained (the weakly supervised
 3DFeat-Net baseline). Prints how many keypoints each source found.
 """

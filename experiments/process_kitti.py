@@ -1,4 +1,4 @@
-r"""Process KITTI odometry into 3DFeat-Net's registration layout (REFERENCE §9).
+r"""Process KITTI odometry into 3DFeat-Net's registration layout (docs/method.md §6).
 
     python -m experiments.process_kitti --kitti_root=/data/kitti/dataset \
         --sequences=08,09,10 --out=/data/kitti_processed [--icp]

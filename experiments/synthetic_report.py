@@ -1,5 +1,5 @@
 r"""How realistic is the synthetic data? Side-by-side scan statistics against the real
-KITTI scans beside the project, and the ISS + FPFH + RANSAC baseline (REFERENCE §4-6)
+KITTI scans beside the project, and the ISS + FPFH + RANSAC baseline (docs/method.md §4)
 on the synthetic KITTI-style test pairs.
 
     python -m experiments.synthetic_report --data=data_cache/synthetic_small \

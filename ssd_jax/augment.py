@@ -1,6 +1,6 @@
 """Random self-rotation, jitter and branch resampling drawn with `jax.random`.
 
-The paper's self-supervision (REFERENCE §2) rotates and jitters; the branch
+The paper's self-supervision (docs/method.md §2) rotates and jitters; the branch
 resampling (point dropout, offset crops) is this project's label-free remedy for two
 branches that are otherwise the same points.
 """
@@ -77,7 +77,7 @@ def jitter(key: jax.Array, points: jax.Array, sigma: float, clip: float | None) 
   return points + noise
 
 
-# 3DFeat-Net's augmentations (REFERENCE §3), one draw per cloud of a batch [B, N, 3].
+# 3DFeat-Net's augmentations (docs/method.md §5), one draw per cloud of a batch [B, N, 3].
 
 def rotate_small(key: jax.Array, points: jax.Array, sigma: float = 0.06,
                  clip: float = 0.18) -> jax.Array:

@@ -141,7 +141,7 @@ def rotm2eul_zyx(r: jax.Array) -> jax.Array:
 
 
 def euler_sum_rre_deg(r_gt: jax.Array, r_est: jax.Array) -> jax.Array:
-  """The paper's RRE: sum of |ZYX Euler angles| of r_gt^T r_est, in degrees (REFERENCE §6)."""
+  """The paper's RRE: sum of |ZYX Euler angles| of r_gt^T r_est, in degrees (docs/method.md §4)."""
   xp = _xp(r_gt, r_est)
   rel = xp.swapaxes(r_gt, -1, -2) @ r_est
   return xp.degrees(xp.sum(xp.abs(rotm2eul_zyx(rel)), -1))

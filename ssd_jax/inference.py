@@ -11,7 +11,7 @@ once per bucket, not once per cloud. Neighbourhoods are PointNet++ ball queries 
 points within r in index order, padded by repeating the first). Two paths give
 identical results:
   * 'kdtree': a host KD-tree (scipy) finds the neighbours, far faster on CPU for
-    large clouds (REFERENCE §10);
+    large clouds (docs/benchmarks.md);
   * 'dense': `grouping.ball_query` in JAX, a dense [chunk, N] distance matrix,
     with the cloud padded to a power-of-two bucket.
 Clouds are put in a seeded random order first, so that "first c in index
@@ -209,7 +209,7 @@ def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, c
                       seed: int = 0) -> np.ndarray:
   """One learned descriptor per small cloud, at its center, batched across clouds.
 
-  For descriptor-matching sets (REFERENCE §8) of thousands of cluster crops: equal to
+  For descriptor-matching sets (docs/method.md §4) of thousands of cluster crops: equal to
   `describe(model, clouds[k], centers[k:k+1], seed=seed)` for every k, without a
   network call per crop. clouds: sequence of [N_k, 3] metres; centers [K, 3] metres
   (default: each crop's origin) -> [K, D] float32.
@@ -262,7 +262,7 @@ def attention(model: Model, points: np.ndarray, search: str = 'kdtree', chunk: i
 
 def non_max_suppression(points: np.ndarray, scores: np.ndarray, radius: float = 0.5,
                         min_ratio: float = 0.01, max_keypoints: int = 1024) -> np.ndarray:
-  """3DFeat-Net keypoints (REFERENCE §4): points whose score is the highest within
+  """3DFeat-Net keypoints (docs/method.md §4): points whose score is the highest within
   `radius` metres, at least `min_ratio` of the maximum, the strongest `max_keypoints`
   first. -> indices [K]."""
   pairs = spatial.cKDTree(points).query_pairs(radius, output_type='ndarray')

@@ -1,4 +1,4 @@
-"""The 3DFeat-Net network body as Flax Linen modules (REFERENCE §1).
+"""The 3DFeat-Net network body as Flax Linen modules (docs/method.md §1).
 
 The network is a pure function of explicit variables `{'params', 'batch_stats'}`
 and inputs: `FeatureNet().apply(variables, clusters, train=...)`.

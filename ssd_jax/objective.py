@@ -1,4 +1,4 @@
-"""The self-supervised objective of the paper (REFERENCE §2), as a pure function.
+"""The self-supervised objective of the paper (docs/method.md §2), as a pure function.
 
     cloud --self_rotate--> (PC1, PC2) --jitter--> centers + clusters
       --shared FeatureNet--> descriptors --cf_solve--> R --rotation_loss--> loss
@@ -119,12 +119,12 @@ def attention_weighted_triplet(desc: jax.Array, attention: jax.Array, mask: jax.
                                margin: float, hinge: str = 'cloud',
                                normalization: str = 'softmax'
                                ) -> tuple[jax.Array, dict[str, jax.Array]]:
-  """3DFeat-Net's loss (REFERENCE §3) for one triplet.
+  """3DFeat-Net's loss (docs/method.md §5) for one triplet.
 
   desc [3, k, D] (anchor, positive, negative), attention [3, k] >= 0, mask [3, k]
   bool. For anchor cluster i: d_pos = distance to its best match in the positive
   cloud, d_neg the same in the negative; w = the anchor's attention normalised over
-  its valid clusters, by a softmax (`normalization='softmax'`, REFERENCE's wording) or
+  its valid clusters, by a softmax (`normalization='softmax'`, the 3DFeat-Net paper's wording) or
   by its sum (`'sum'`, 3DFeat-Net's released code). The hinge sits on each cluster
   (`hinge='cluster'`: sum_i w_i max(0, d_pos_i - d_neg_i + margin)) or on the weighted
   sums (`'cloud'`, the released code: max(0, sum_i w_i d_pos_i - sum_i w_i d_neg_i +

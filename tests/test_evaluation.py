@@ -23,7 +23,7 @@ def _transform(yaw_deg, t):
       np.asarray(geometry.rotation_z(np.deg2rad(yaw_deg)), np.float64), np.asarray(t, np.float64)))
 
 
-# ---- descriptor matching (REFERENCE §8) -------------------------------------------------
+# ---- descriptor matching (docs/method.md §4) -------------------------------------------------
 
 def test_fpr_at_95_recall_by_hand():
   pos = np.arange(1, 21) * 0.1                       # 0.1 ... 2.0
@@ -81,7 +81,7 @@ def test_fpfh_at_center_is_finite_and_depends_on_the_centre():
   assert np.abs(d - moved).sum() > 1.0   # a different centre, a different descriptor
 
 
-# ---- precision (REFERENCE §7) ----------------------------------------------------------
+# ---- precision (docs/method.md §4) ----------------------------------------------------------
 
 def test_overlap_mask_counts_keypoints_near_the_moved_cloud():
   cloud2 = np.array([[0.0, 0, 0], [10, 0, 0]])

@@ -1,6 +1,6 @@
 """Registration test sets: pairs of cloud files with their ground-truth T_12.
 
-Layouts (REFERENCE §6, §9), all with 3DFeat-Net's `groundtruths.txt`:
+Layouts (docs/method.md §4, §9), all with 3DFeat-Net's `groundtruths.txt`:
   * Oxford: ROOT/groundtruths.txt and ROOT/test_models/<idx>.bin;
   * processed KITTI: ROOT/<seq>/groundtruths.txt and ROOT/<seq>/%06d.bin, or a
     single such sequence folder ROOT/groundtruths.txt + ROOT/%06d.bin.

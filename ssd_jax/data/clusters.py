@@ -1,4 +1,4 @@
-"""The descriptor-matching set (REFERENCE §8): pairs of 4 m clusters, label 1/0.
+"""The descriptor-matching set (docs/method.md §4): pairs of 4 m clusters, label 1/0.
 
 Layout:
 

@@ -1,6 +1,6 @@
 """`groundtruths.txt`: the pair list with the transform between the two clouds of each pair.
 
-Format (REFERENCE §6, as 3DFeat-Net's evaluation reads it): a header line, then
+Format (docs/method.md §4, as 3DFeat-Net's evaluation reads it): a header line, then
 one line per pair, tab-separated,
 
     idx1  idx2  t_1  t_2  t_3  q_1  q_2  q_3  q_4

@@ -1,4 +1,4 @@
-"""KITTI odometry (raw) -> 3DFeat-Net's processed registration set (REFERENCE §9).
+"""KITTI odometry (raw) -> 3DFeat-Net's processed registration set (docs/method.md §6).
 
 Input: `sequences/XX/velodyne/%06d.bin` (N x 4), `sequences/XX/calib.txt` (line
 `Tr:` = velodyne -> camera 0) and `poses/XX.txt` (camera-0 poses, one 3 x 4 per

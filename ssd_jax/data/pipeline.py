@@ -55,7 +55,7 @@ def crop(points: np.ndarray, radius: float) -> np.ndarray:
 
 def subsample_indices(rng: np.random.Generator, m: int, num_points: int) -> np.ndarray:
   """Exactly `num_points` indices into m rows: a random subset, or all rows in random
-  order plus random repeats when fewer exist (REFERENCE §1). -> [num_points] int."""
+  order plus random repeats when fewer exist (docs/method.md §1). -> [num_points] int."""
   if m >= num_points:
     return rng.choice(m, num_points, replace=False)
   return np.concatenate([rng.permutation(m), rng.integers(0, m, num_points - m)])
@@ -159,7 +159,7 @@ def scene_rotations(files: Sequence[os.PathLike]) -> list[np.ndarray | None]:
 
 
 class TripletDataset:
-  """3DFeat-Net's training triplets from an Oxford `train.txt` (REFERENCE §3).
+  """3DFeat-Net's training triplets from an Oxford `train.txt` (docs/method.md §5).
 
   Each anchor is a cloud with at least one positive; its positive is drawn from its
   `positives`, its negative from the clouds that are neither positive, non-negative

@@ -1,11 +1,11 @@
-"""Descriptor matching without a detector (paper Table III and its text, REFERENCE §8).
+"""Descriptor matching without a detector (paper Table III and its text, docs/method.md §4).
 
 Each pair of 4 m cluster crops gets one descriptor per cluster, at the cluster's
 center (the origin), with a 2 m radius. The error is the false-positive rate at
 95 % recall: the threshold is the descriptor distance that 95 % of the positive
 pairs do not exceed; FPR = share of negative pairs at or below it. The
 ISS-filtered variant keeps the pairs where both clusters have an ISS keypoint
-(REFERENCE §4 parameters, detected on the cluster) within r_th of the center.
+(docs/method.md §4 parameters, detected on the cluster) within r_th of the center.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Keypoint x descriptor rows and a per-cloud cache of their features.
 
 A row is "keypoints+descriptor": keypoints `iss`, `random` or a checkpoint name
-(its detector: attention + NMS, REFERENCE §4); descriptors `fpfh` or a
+(its detector: attention + NMS, docs/method.md §4); descriptors `fpfh` or a
 checkpoint name. Checkpoint names map to training workdirs in the configs
 (`checkpoints.ours`, `checkpoints.feat3dnet`). Registration and the precision
 test use the same keypoints and descriptors of the same clouds, so one

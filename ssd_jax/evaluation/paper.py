@@ -1,4 +1,4 @@
-"""The paper's published numbers, printed beside recomputed ones (REFERENCE §6-8)."""
+"""The paper's published numbers, printed beside recomputed ones (docs/method.md §4)."""
 
 # Tables I / II, the paper's own runs: (RTE m, RRE deg, success %, avg #iter).
 REGISTRATION = {

@@ -1,4 +1,4 @@
-"""The precision test of paper Fig. 4 (REFERENCE §7).
+"""The precision test of paper Fig. 4 (docs/method.md §4).
 
 For every keypoint of cloud 1, its nearest descriptor neighbour among cloud 2's
 keypoints; the error is the distance between the keypoint and that neighbour

@@ -1,5 +1,5 @@
 """Tables I and II: keypoints -> descriptors -> NN matches -> RANSAC on every test
-pair, summarised as the paper does (REFERENCE §6)."""
+pair, summarised as the paper does (docs/method.md §4)."""
 
 from __future__ import annotations
 

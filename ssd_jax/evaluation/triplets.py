@@ -1,4 +1,4 @@
-"""What the triplet objective can learn from its training triplets (3DFeat-Net, REFERENCE §3).
+"""What the triplet objective can learn from its training triplets (3DFeat-Net, docs/method.md §5).
 
 Two measurements on the trainer's fixed probe triplets:
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-FPFH_RADIUS = 4.0  # REFERENCE §5: FPFH within 4 m.
+FPFH_RADIUS = 4.0  # docs/method.md §4: FPFH within 4 m.
 # Neighbour cap of the 4 m FPFH search: ~the 90th percentile of 4 m neighbourhood sizes
 # in a 0.2 m-voxel KITTI scan, so nearly an uncapped radius search (PCL's).
 FPFH_MAX_NN = 1000

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import spatial
 
-# REFERENCE §4: the parameters of the paper's ISS keypoints.
+# docs/method.md §4: the parameters of the paper's ISS keypoints.
 ISS_PARAMS = dict(salient_radius=1.0, non_max_radius=0.5, gamma_21=0.975, gamma_32=0.975,
                   min_neighbors=7)
 

@@ -1,4 +1,4 @@
-"""Putative correspondences from descriptors (REFERENCE §6)."""
+"""Putative correspondences from descriptors (docs/method.md §4)."""
 
 from __future__ import annotations
 

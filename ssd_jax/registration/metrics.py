@@ -1,4 +1,4 @@
-"""Registration errors and table summaries (REFERENCE §6)."""
+"""Registration errors and table summaries (docs/method.md §4)."""
 
 from __future__ import annotations
 

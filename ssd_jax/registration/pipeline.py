@@ -37,7 +37,7 @@ class Registration:
 
 def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0,
                       num_random: int = 1024) -> np.ndarray:
-  """Keypoint indices into points [N, 3]: ISS (REFERENCE §4), learned attention +
+  """Keypoint indices into points [N, 3]: ISS (docs/method.md §4), learned attention +
   NMS (needs a detector-trained `inference.Model`), or `num_random` random points."""
   if method == 'iss':
     return keypoints_lib.iss(points)
@@ -54,7 +54,7 @@ def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0
 def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: str,
                         model=None, search: str = 'kdtree',
                         fpfh_max_nn: int = features.FPFH_MAX_NN) -> np.ndarray:
-  """[K, D] descriptors at points[keypoint_idx]: FPFH (REFERENCE §5) or learned."""
+  """[K, D] descriptors at points[keypoint_idx]: FPFH (docs/method.md §4) or learned."""
   if method == 'fpfh':
     return features.fpfh(points, keypoint_idx, max_nn=fpfh_max_nn)
   if method == 'learned':

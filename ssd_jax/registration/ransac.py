@@ -1,4 +1,4 @@
-"""RANSAC for rigid registration from putative correspondences (REFERENCE §6).
+"""RANSAC for rigid registration from putative correspondences (docs/method.md §4).
 
 The rule is P. Kovesi's MATLAB `ransac.m`, as 3DFeat-Net evaluates. Each trial
 takes a minimal sample of 3 correspondences, fits it with Kabsch and counts the

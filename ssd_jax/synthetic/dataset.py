@@ -9,7 +9,7 @@
       test_kitti/<seq>/poses.txt
       test_oxford/test_models/<idx>.bin   Oxford-style: 16,384 points, randomly rotated
       test_oxford/groundtruths.txt
-      clusters/filenames.txt        descriptor-matching pairs (REFERENCE §8)
+      clusters/filenames.txt        descriptor-matching pairs (docs/method.md §4)
       clusters/<i>_0.bin, <i>_1.bin 4 m crops centred on a random point, randomly rotated
       synthetic.json                the config and seed that made it, and counts
 
@@ -225,7 +225,7 @@ def _crop_cluster(rng, points, normals, center, radius):
 
 def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
   """Matching pairs: one world point seen from two scans < 10 m apart; non-matching:
-  points of two scans at least 20 m apart (REFERENCE §8). Centres are random scan
+  points of two scans at least 20 m apart (docs/method.md §4). Centres are random scan
   points (`clusters.centers='random'`, the paper's) or ISS keypoints ('iss')."""
   from ssd_jax.registration import keypoints  # pylint: disable=g-import-not-at-top
   cfg = config.clusters
