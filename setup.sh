@@ -17,4 +17,8 @@ if [ ! -x .venv/bin/python ]; then
   "$python" -m venv .venv
 fi
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -e '.[test]'
+# Pinned versions (constraints.txt): a fresh clone gets the libraries the results were
+# measured with, so two machines compute the same numbers.
+constraints=(-c constraints.txt)
+if [ "${SSD_JAX_UNPINNED:-0}" = "1" ]; then constraints=(); fi
+.venv/bin/python -m pip install -q "${constraints[@]}" -e '.[test]'

@@ -54,6 +54,7 @@ def get_config() -> ml_collections.ConfigDict:
   kitti.spacing = 10.0
   kitti.spacing_jitter = 0.25      # each cloud moves up to ±2.5 m along the lane
   kitti.pair_max_distance = 10.0
+  kitti.random_yaw = False         # True: turn each scan about z (configs/synthetic_kitti_yaw.py)
 
   # Oxford-style test models: 30 m crop, 16,384 points, random rotation about z.
   config.test_oxford = oxford = ml_collections.ConfigDict()

@@ -20,7 +20,7 @@ import subprocess
 import sys
 import time
 
-from ssd_jax import runtime
+from ssd_jax import cli, runtime
 
 runtime.reexec_with_hugepages()
 
@@ -172,4 +172,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -16,7 +16,7 @@ import jax
 import numpy as np
 
 from configs import paper
-from ssd_jax import inference, train
+from ssd_jax import cli, inference, train
 from ssd_jax.data import io
 from ssd_jax.registration import features
 
@@ -79,4 +79,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -18,6 +18,7 @@ from absl import flags
 import numpy as np
 from tqdm import auto as tqdm
 
+from ssd_jax import cli
 from ssd_jax.data import benchmarks, io
 from ssd_jax.registration import matching, metrics, pipeline, ransac
 
@@ -81,4 +82,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

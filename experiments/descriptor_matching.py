@@ -9,14 +9,14 @@ distances.npz (per-pair labels, descriptor distances and ISS center distances).
 
 from absl import app
 from absl import flags
-from ml_collections import config_flags
 
+from ssd_jax import cli
 from ssd_jax.evaluation import runs
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Output directory.')
-config_flags.DEFINE_config_file('config', 'configs/descriptor_matching.py', 'Evaluation config.')
+cli.define_config_file('config', 'configs/descriptor_matching.py', 'Evaluation config.')
 flags.mark_flags_as_required(['workdir'])
 
 
@@ -32,4 +32,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -10,14 +10,14 @@ inliers).
 
 from absl import app
 from absl import flags
-from ml_collections import config_flags
 
+from ssd_jax import cli
 from ssd_jax.evaluation import runs
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Output directory.')
-config_flags.DEFINE_config_file('config', 'configs/registration.py', 'Evaluation config.')
+cli.define_config_file('config', 'configs/registration.py', 'Evaluation config.')
 flags.mark_flags_as_required(['workdir'])
 
 
@@ -36,4 +36,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

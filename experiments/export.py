@@ -14,7 +14,7 @@ from absl import app
 from absl import flags
 import ml_collections
 
-from ssd_jax import checkpoint, inference, pretrained
+from ssd_jax import checkpoint, cli, inference, pretrained
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('run', None, 'Training workdir.')
@@ -47,4 +47,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -7,8 +7,10 @@ registered on the test sets beside ISS + FPFH; a CSV, a Markdown table and a PNG
     python -m experiments.learning_curve --run=paper=runs/abl_paper \
         --run=robust=runs/cpu_robust --steps=3000 --out=runs/ablation
 
-Default sets: the synthetic KITTI- and Oxford-style test sets and the re-scan pairs
-of the real scans (experiments.make_real_pairs); --set=NAME=DIR replaces them. Rerun
+Default sets: the synthetic KITTI-style test set as scanned and with each scan turned
+by a random yaw (configs/synthetic_kitti_yaw.py), the Oxford-style test set and the
+re-scan pairs of the real scans (experiments.make_real_pairs); --set=NAME=DIR replaces
+them. Rerun
 while training goes on: finished cells are read back from OUT/learning_curve.csv.
 """
 
@@ -18,7 +20,7 @@ import os
 from absl import app
 from absl import flags
 
-from ssd_jax import checkpoint, inference, viz
+from ssd_jax import checkpoint, cli, inference, viz
 from ssd_jax.data import benchmarks, io
 from ssd_jax.evaluation import learning_curve, tables
 from ssd_jax.logging_utils import quiet_libraries
@@ -29,6 +31,7 @@ flags.DEFINE_multi_string('run', None, 'Training workdir, or NAME=DIR (repeatabl
 flags.DEFINE_string('out', None, 'Output directory (default RUN/learning_curve).')
 flags.DEFINE_list('steps', [], 'Checkpoint steps to evaluate (default: every one kept).')
 flags.DEFINE_multi_string('set', ['kitti_synthetic=data_cache/synthetic_small/test_kitti',
+                                  'kitti_yaw_synthetic=data_cache/synthetic_kitti_yaw/test_kitti',
                                   'oxford_synthetic=data_cache/synthetic_small/test_oxford',
                                   'real_rescan=data_cache/real_pairs'],
                           'NAME=DIR of a registration test set (repeatable).')
@@ -107,4 +110,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

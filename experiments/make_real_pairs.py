@@ -15,6 +15,7 @@ from absl import app
 from absl import flags
 from tqdm import auto as tqdm
 
+from ssd_jax import cli
 from ssd_jax.data import io, rescan
 
 FLAGS = flags.FLAGS
@@ -44,4 +45,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -8,10 +8,9 @@ import time
 
 from absl import app
 from absl import flags
-from ml_collections import config_flags
 from tqdm import auto as tqdm
 
-from ssd_jax import viz
+from ssd_jax import cli, viz
 from ssd_jax.synthetic import dataset
 
 FLAGS = flags.FLAGS
@@ -21,7 +20,7 @@ flags.DEFINE_bool('overwrite', False, 'Replace a dataset made with a different c
 flags.DEFINE_bool('progress_bar', True, 'Show a progress bar.')
 flags.DEFINE_string('figure', None, 'Also draw raw scan 4 of test_kitti/00 to this PNG '
                     '(top view + perspective, coloured by height).')
-config_flags.DEFINE_config_file('config', 'configs/synthetic_small.py', 'Synthetic-data config.')
+cli.define_config_file('config', 'configs/synthetic_small.py', 'Synthetic-data config.')
 flags.mark_flags_as_required(['out'])
 
 
@@ -58,4 +57,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -11,7 +11,7 @@ it needs a checkpoint whose attention head was trained (the weakly supervised
 from absl import app
 from absl import flags
 
-from ssd_jax import viz
+from ssd_jax import cli, viz
 from ssd_jax.data import io, pipeline as data_pipeline
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import pipeline
@@ -51,4 +51,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

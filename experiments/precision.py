@@ -9,14 +9,14 @@ precision.md (the value at x = 1 m and the keypoints counted) and precision.png.
 
 from absl import app
 from absl import flags
-from ml_collections import config_flags
 
+from ssd_jax import cli
 from ssd_jax.evaluation import runs
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Output directory.')
-config_flags.DEFINE_config_file('config', 'configs/precision.py', 'Evaluation config.')
+cli.define_config_file('config', 'configs/precision.py', 'Evaluation config.')
 flags.mark_flags_as_required(['workdir'])
 
 
@@ -35,4 +35,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -18,6 +18,7 @@ from absl import flags
 import numpy as np
 from tqdm import auto as tqdm
 
+from ssd_jax import cli
 from ssd_jax.data import groundtruth, io, kitti, preprocess
 from ssd_jax.registration import metrics, pipeline
 
@@ -89,4 +90,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

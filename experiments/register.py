@@ -5,7 +5,7 @@ r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into clou
         [--checkpoint=ours|RUN_DIR|EXPORT_DIR] [--groundtruth=DIR/groundtruths.txt] \
         [--icp] [--json=OUT.json] [--plot=OUT.png]
 
-Reads .bin (N x 3 / 4 / 6 float32, detected or --format), .npy, .ply, .pcd. Learned
+Reads .bin (N x 3 / 4 / 6 float32 or float64 rows, detected or --format), .npy, .ply, .pcd. Learned
 descriptors and keypoints come from the shipped pretrained models (`ours`, and
 `ours_detector` for learned keypoints) unless --checkpoint names another.
 With --groundtruth (a `groundtruths.txt` listing the pair by the clouds' file
@@ -20,7 +20,7 @@ from absl import app
 from absl import flags
 import numpy as np
 
-from ssd_jax import geometry, pretrained
+from ssd_jax import cli, geometry, pretrained
 from ssd_jax.data import groundtruth, io, pipeline as data_pipeline
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import metrics, pipeline
@@ -28,7 +28,8 @@ from ssd_jax.registration import metrics, pipeline
 FLAGS = flags.FLAGS
 flags.DEFINE_string('cloud1', None, 'Target cloud (its frame is the output frame).')
 flags.DEFINE_string('cloud2', None, 'Source cloud, mapped into cloud 1 by T_12.')
-flags.DEFINE_string('format', 'auto', '.bin layout: auto | xyz | xyzi | xyzn.')
+flags.DEFINE_enum('format', 'auto', ['auto', *io.BIN_FORMATS],
+                  '.bin layout (float32 rows; *64: float64 rows); auto refuses to guess.')
 flags.DEFINE_enum('keypoints', 'iss', pipeline.KEYPOINTS, 'Keypoint detector.')
 flags.DEFINE_list('descriptor', ['fpfh'], 'Descriptor(s): fpfh, learned; a list runs each.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model name, export folder or training workdir '
@@ -56,6 +57,19 @@ def _ground_truth(path, cloud1, cloud2):
   raise SystemExit(f'error: {path} does not list the pair ({i1}, {i2})')
 
 
+def _check_writable(path: str | None) -> None:
+  """Create an output file's folder now, so that a bad path fails before the work."""
+  if not path:
+    return
+  folder = os.path.dirname(os.path.abspath(path))
+  try:
+    os.makedirs(folder, exist_ok=True)
+  except OSError as e:
+    raise ValueError(f'cannot create the folder of {path}: {e.strerror}') from None
+  if os.path.isdir(path) or not os.access(folder, os.W_OK):
+    raise ValueError(f'{path}: cannot write a file there')
+
+
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
@@ -68,7 +82,10 @@ def main(argv):
   # shipped self-supervised detector.
   checkpoint = FLAGS.checkpoint or ('ours_detector' if FLAGS.keypoints == 'learned' else 'ours')
   try:
-    clouds = [data_pipeline.clean_cloud(io.read_cloud(p, FLAGS.format), p)
+    for out_path in (FLAGS.json, FLAGS.plot):
+      _check_writable(out_path)
+    # float64 until register() has centred the pair: UTM-scale clouds keep their precision.
+    clouds = [data_pipeline.clean_cloud(io.read_cloud(p, FLAGS.format), p, np.float64)
               for p in (FLAGS.cloud1, FLAGS.cloud2)]
     t_gt = _ground_truth(FLAGS.groundtruth, FLAGS.cloud1, FLAGS.cloud2) if FLAGS.groundtruth else None
     model = None
@@ -80,9 +97,8 @@ def main(argv):
   for descriptor in FLAGS.descriptor:
     try:
       start = time.perf_counter()
-      f1, f2 = (pipeline.cloud_features(c, FLAGS.keypoints, descriptor, model, FLAGS.seed,
-                                        FLAGS.fpfh_max_nn) for c in clouds)
-      reg = pipeline.estimate(f1, f2, FLAGS.seed)
+      reg, f1, f2 = pipeline.register(clouds[0], clouds[1], FLAGS.keypoints, descriptor, model,
+                                      FLAGS.seed, FLAGS.fpfh_max_nn, icp=FLAGS.icp)
     except ValueError as e:
       raise SystemExit(f'error: {e}') from None
     transform = reg.transform
@@ -92,8 +108,7 @@ def main(argv):
            'seconds': {**{f'cloud1_{k}': v for k, v in f1.seconds.items()},
                        **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds}}
     if FLAGS.icp:
-      transform, fitness = pipeline.refine_icp(clouds[0], clouds[1], transform)
-      out['icp_fitness'] = fitness
+      out['icp_fitness'] = reg.icp_fitness
     out['seconds']['total'] = time.perf_counter() - start
     out['T_12'] = transform.tolist()
     out['overlap_fitness'] = pipeline.overlap_fitness(clouds[0], clouds[1], transform)
@@ -125,4 +140,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -8,14 +8,14 @@ Writes WORKDIR/repeatability.md and .csv.
 
 from absl import app
 from absl import flags
-from ml_collections import config_flags
 
+from ssd_jax import cli
 from ssd_jax.evaluation import runs
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Output directory.')
-config_flags.DEFINE_config_file('config', 'configs/repeatability.py', 'Evaluation config.')
+cli.define_config_file('config', 'configs/repeatability.py', 'Evaluation config.')
 flags.mark_flags_as_required(['workdir'])
 
 
@@ -34,4 +34,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

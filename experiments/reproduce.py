@@ -18,19 +18,27 @@ from pathlib import Path
 from absl import app
 from absl import flags
 import ml_collections
-from ml_collections import config_flags
 
-from ssd_jax import viz
+from ssd_jax import cli, viz
 from ssd_jax.data import benchmarks, io
-from ssd_jax.evaluation import features, runs
+from ssd_jax.evaluation import features, fingerprint, runs
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import pipeline
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('data_root', None, 'Folder holding test sets (see configs/reproduce.py).')
 flags.DEFINE_string('workdir', None, 'Output folder for report.md, tables and figures.')
-config_flags.DEFINE_config_file('config', 'configs/reproduce.py', 'Reproduction config.')
+cli.define_config_file('config', 'configs/reproduce.py', 'Reproduction config.')
 flags.mark_flags_as_required(['data_root', 'workdir'])
+
+REPRODUCIBILITY = (
+    'The same command on the same machine writes the same numbers (every stage is '
+    'seeded). Across machines, a short hash of each stage\'s output below tells where two '
+    'reports part: the first differing row is the stage to look at. The generated data, '
+    'ISS keypoints, FPFH and learned descriptors and RANSAC do not depend on the CPU\'s '
+    'vector instructions or thread count; training does (XLA\'s CPU code rounds '
+    'differently without AVX2), so a run trained on another CPU gives other weights and '
+    'other "this run" rows: docs/reproduce.md gives the measured spread.')
 
 TITLES = {'oxford': 'Table I: registration on Oxford-style pairs',
           'kitti': 'Table II: registration on KITTI-style pairs'}
@@ -199,6 +207,13 @@ def write_report(out_dir, root, config, store, missing, sections, skipped, secon
   lines += [f'- {s}' for s in skipped] or ['- nothing']
   for title, text in sections:
     lines += ['', f'## {title}', '', text.strip()]
+  stages = store.fingerprints()
+  for log in sorted(out_dir.glob('table_*_pairs.jsonl')):
+    table = log.name[len('table_'):-len('_pairs.jsonl')]
+    stages.update({f'registration: {table}, {row}': d
+                   for row, d in fingerprint.registration_digests(log).items()})
+  lines += ['', '## Reproducibility', '', REPRODUCIBILITY, '',
+            fingerprint.markdown(stages, fingerprint.environment())]
   lines += ['', '## Time', '', '| stage | s |', '|---|---|']
   lines += [f'| {k} | {v:.1f} |' for k, v in seconds.items()]
   lines += [f'| (within these) {k} | {v:.1f} |' for k, v in sorted(store.seconds.items())]
@@ -207,4 +222,4 @@ def write_report(out_dir, root, config, store, missing, sections, skipped, secon
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

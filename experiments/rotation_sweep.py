@@ -13,7 +13,7 @@ from absl import app
 from absl import flags
 import numpy as np
 
-from ssd_jax import pretrained, viz
+from ssd_jax import cli, pretrained, viz
 from ssd_jax.data import io, pipeline
 from ssd_jax.evaluation import orientation, tables
 from ssd_jax.logging_utils import quiet_libraries
@@ -64,4 +64,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

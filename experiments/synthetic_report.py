@@ -17,6 +17,7 @@ import ml_collections
 import numpy as np
 from tqdm import auto as tqdm
 
+from ssd_jax import cli
 from ssd_jax.data import groundtruth, io
 from ssd_jax.registration import features, keypoints, matching, metrics, ransac
 from ssd_jax.synthetic import dataset, realism
@@ -110,4 +111,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -8,7 +8,7 @@ Rerunning the same command resumes from the latest checkpoint in --workdir.
 
 import os
 
-from ssd_jax import runtime
+from ssd_jax import cli, runtime
 
 runtime.reexec_with_hugepages()
 
@@ -16,15 +16,14 @@ from absl import app  # pylint: disable=g-import-not-at-top,wrong-import-positio
 from absl import flags
 from absl import logging
 import jax
-from ml_collections import config_flags
 
-from ssd_jax import train
+from ssd_jax import checkpoint, train
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.data import io, pipeline
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Directory for checkpoints and metrics.jsonl.')
-config_flags.DEFINE_config_file('config', None, 'Training config file.', lock_config=True)
+cli.define_config_file('config', None, 'Training config file.', lock_config=True)
 flags.mark_flags_as_required(['config', 'workdir'])
 
 
@@ -41,9 +40,10 @@ def main(argv):
       hint = ('\nthe synthetic set is made by: python -m experiments.make_synthetic '
               '--config=configs/synthetic_small.py --out=data_cache/synthetic_small')
     raise SystemExit(f'error: {e}{hint}') from None
-  except (train.ConfigError, pipeline.CloudDataError, train.TrainingDiverged) as e:
+  except (train.ConfigError, pipeline.CloudDataError, train.TrainingDiverged,
+          checkpoint.CheckpointError) as e:
     raise SystemExit(f'error: {e}') from None
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -15,17 +15,16 @@ turn: its probe with each cloud turned by its own angle within ±10°, ±20°, .
 from absl import app
 from absl import flags
 import jax
-from ml_collections import config_flags
 import numpy as np
 
-from ssd_jax import inference, train
+from ssd_jax import cli, inference, train
 from ssd_jax.evaluation import orientation, triplets
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Workdir of the triplet-trained run.')
 flags.DEFINE_bool('fpfh', True, 'Also measure FPFH on the probe triplets (~1 s per triplet).')
-config_flags.DEFINE_config_file('config', None, 'The run\'s training config.')
+cli.define_config_file('config', None, 'The run\'s training config.')
 flags.mark_flags_as_required(['workdir', 'config'])
 
 STORED = ('jitter', 'rotate_small', 'shift')
@@ -91,4 +90,4 @@ def main(argv):
 
 
 if __name__ == '__main__':
-  app.run(main)
+  cli.run(main)

@@ -8,12 +8,41 @@ checkpoint that restore would pick up.
 
 from __future__ import annotations
 
+import gc
 import os
+import sys
 from typing import Any
 
+from absl import logging
 import jax
 import ml_collections
 import orbax.checkpoint as ocp
+
+# Appended to a damaged step folder's name when training moves it aside: orbax reads
+# only integer step names, and nothing is deleted.
+DAMAGED_SUFFIX = '.damaged'
+
+
+class CheckpointError(ValueError):
+  """A checkpoint is missing, damaged (truncated or corrupt files) or unreadable."""
+
+
+def _reason(error: Exception) -> str:
+  """One line of an orbax / tensorstore / JSON error, which may span a hundred."""
+  line = (str(error).strip().splitlines() or [''])[0].split('. See full TensorStore')[0]
+  return f'{type(error).__name__}: {line[:160]}' if line else type(error).__name__
+
+
+def _drop_failed_reads() -> None:
+  """Collect the sibling reads of a failed restore now, without their tracebacks: each
+  array of a damaged checkpoint fails alike, and Python would print every one ("Exception
+  ignored in coroutine") when they are garbage-collected; the first is reported."""
+  previous = sys.unraisablehook
+  sys.unraisablehook = lambda unraisable: None
+  try:
+    gc.collect()
+  finally:
+    sys.unraisablehook = previous
 
 
 class Checkpointer:
@@ -53,23 +82,55 @@ class Checkpointer:
                                       config=ocp.args.JsonSave(config.to_dict())),
         force=True)
 
-  def restore(self, abstract_state: Any, step: int | None = None) -> tuple[Any, dict]:
-    """Restore `step` (default latest) into the structure, shapes, dtypes and
-    shardings of `abstract_state` (a pytree of `jax.ShapeDtypeStruct`)."""
+  def _step_path(self, step: int) -> str:
+    return os.path.join(self.directory, str(step))
+
+  def _restore(self, step: int | None, **items) -> dict:
     step = self.latest_step() if step is None else step
     if step is None:
       raise FileNotFoundError(f'no checkpoint in {self.directory}')
-    restored = self._manager.restore(
-        step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract_state),
-                                      config=ocp.args.JsonRestore()))
+    if step not in self._manager.all_steps():
+      raise FileNotFoundError(f'no checkpoint at step {step} in {self.directory} '
+                              f'(kept: {self.all_steps()})')
+    try:
+      return self._manager.restore(step, args=ocp.args.Composite(**items))
+    except Exception as e:  # pylint: disable=broad-except
+      # orbax surfaces a damaged file as tensorstore, JSON or plain exceptions.
+      reason = _reason(e)
+    _drop_failed_reads()
+    raise CheckpointError(f'{self._step_path(step)}: damaged checkpoint ({reason})')
+
+  def restore(self, abstract_state: Any, step: int | None = None) -> tuple[Any, dict]:
+    """Restore `step` (default latest) into the structure, shapes, dtypes and
+    shardings of `abstract_state` (a pytree of `jax.ShapeDtypeStruct`).
+
+    Raises FileNotFoundError when there is no such checkpoint and CheckpointError,
+    naming the step's folder, when its files are damaged."""
+    restored = self._restore(step, state=ocp.args.StandardRestore(abstract_state),
+                             config=ocp.args.JsonRestore())
     return restored['state'], restored['config']
 
   def restore_config(self, step: int | None = None) -> dict:
     """The config stored with a checkpoint (default latest), without the state."""
-    step = self.latest_step() if step is None else step
-    if step is None:
-      raise FileNotFoundError(f'no checkpoint in {self.directory}')
-    return self._manager.restore(step, args=ocp.args.Composite(config=ocp.args.JsonRestore()))['config']
+    return self._restore(step, config=ocp.args.JsonRestore())['config']
+
+  def restore_latest_intact(self, abstract_state: Any) -> tuple[Any, dict]:
+    """Restore the newest checkpoint that reads back whole; each damaged newer one is
+    logged in one line and moved aside to `<step>.damaged` (so that training can save
+    that step again). Raises CheckpointError when none is intact."""
+    damaged = []
+    for step in reversed(self.all_steps()):
+      try:
+        return self.restore(abstract_state, step)
+      except CheckpointError as e:
+        aside = self._step_path(step) + DAMAGED_SUFFIX
+        os.replace(self._step_path(step), aside)
+        self._manager.reload()
+        logging.warning('%s; moved it to %s and fell back to the checkpoint before it',
+                        e, aside)
+        damaged.append(aside)
+    raise CheckpointError(f'{self.directory}: no intact checkpoint (damaged, moved aside: '
+                          f'{", ".join(damaged)}); start a new --workdir or remove them')
 
   def wait_until_finished(self) -> None:
     self._manager.wait_until_finished()

@@ -32,6 +32,7 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import checkpoint, grouping, network
+from ssd_jax.data.pipeline import check_cloud
 
 SEARCHES = ('kdtree', 'dense')
 
@@ -97,19 +98,6 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
 
 def _bucket(n: int, smallest: int = 1024) -> int:
   return max(smallest, 1 << (max(n, 1) - 1).bit_length())
-
-
-def check_cloud(points: np.ndarray, name: str = 'cloud') -> np.ndarray:
-  """[N, 3] finite float32, or a clear error."""
-  points = np.asarray(points, np.float32)
-  if points.ndim != 2 or points.shape[1] != 3:
-    raise ValueError(f'{name}: expected points of shape [N, 3], got {points.shape}')
-  if len(points) == 0:
-    raise ValueError(f'{name}: the cloud is empty')
-  if not np.all(np.isfinite(points)):
-    raise ValueError(f'{name}: {int((~np.isfinite(points).all(1)).sum())} points have NaN/Inf '
-                     'coordinates; drop them first (ssd_jax.data.pipeline.clean_cloud)')
-  return points
 
 
 def shuffled(points: np.ndarray, seed: int = 0) -> np.ndarray:

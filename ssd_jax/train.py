@@ -347,7 +347,10 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
   if not config.data.path:
     raise ConfigError('data.path is empty: point it at a directory of clouds, an Oxford '
                       'train.txt or a cloud file (--config.data.path=...)')
-  os.makedirs(workdir, exist_ok=True)
+  try:
+    os.makedirs(workdir, exist_ok=True)
+  except OSError as e:
+    raise ConfigError(f'--workdir {workdir}: cannot create it as a folder ({e.strerror})') from None
   t_cfg = config.train
   data_kwargs = dict(fmt=config.data.format, crop_radius=config.data.crop_radius,
                      min_points=config.data.min_points)
@@ -365,8 +368,8 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
                                  t_cfg.keep_checkpoints)
   state = replicate(create_train_state(config, jax.random.key(config.seed)), mesh)
   if ckpt.latest_step() is not None:
-    check_resumable(config, ckpt.restore_config(), ckpt.directory)
-    state, _ = ckpt.restore(checkpoint.abstract_like(state))
+    state, stored = ckpt.restore_latest_intact(checkpoint.abstract_like(state))
+    check_resumable(config, stored, ckpt.directory)
     logging.info('Resumed from step %d in %s', int(state.step), ckpt.directory)
   elif t_cfg.get('init_from'):
     state = replicate(initialize_from(jax.device_get(state), t_cfg.init_from, config), mesh)

@@ -35,7 +35,7 @@ def test_plain_xyz_npy_ply_pcd(tmp_path):
 @pytest.mark.parametrize('content, fmt, message', [
     (b'', 'auto', 'file is empty'),
     (b'\0' * 10, 'auto', 'not a whole number of float32 values'),
-    (np.zeros(7, '<f4').tobytes(), 'auto', 'rows of width 3, 4 or 6'),
+    (np.zeros(7, '<f4').tobytes(), 'auto', 'fit no .bin layout'),
     (np.zeros(8, '<f4').tobytes(), 'xyzn', "6-column float32 rows .format 'xyzn'"),
     (np.zeros(6, '<f4').tobytes(), 'xyzrgb', 'unknown .bin format'),
 ])
@@ -44,6 +44,54 @@ def test_bad_bin_files_are_clear_errors(tmp_path, content, fmt, message):
   path.write_bytes(content)
   with pytest.raises(io.CloudFileError, match=message):
     io.read_cloud(path, fmt)
+
+
+def _real_layouts():
+  """Every .bin layout written from real scans: name -> (bytes, xyz)."""
+  kitti = np.fromfile(shared_path('kitti_object_velodyne', '000000.bin'), '<f4').reshape(-1, 4)
+  oxford = np.fromfile(shared_path('example', 'oxford_270.bin'), '<f4').reshape(-1, 6)
+  out = {}
+  for suffix, dtype in (('', '<f4'), ('64', '<f8')):
+    out['xyz' + suffix] = kitti[:, :3].astype(dtype)
+    out['xyzi' + suffix] = kitti.astype(dtype)
+    out['xyzn' + suffix] = oxford.astype(dtype)
+  return out
+
+
+def test_every_bin_layout_is_detected_and_reads_when_named(tmp_path):
+  for fmt, rows in _real_layouts().items():
+    path = tmp_path / f'{fmt}.bin'
+    rows.tofile(path)
+    assert io.detect_bin_format(np.fromfile(path, np.uint8), path) == fmt
+    for named in ('auto', fmt):
+      xyz = io.read_cloud(path, named)
+      assert xyz.dtype == (np.float64 if fmt.endswith('64') else np.float32)
+      np.testing.assert_array_equal(xyz, rows[:, :3])
+
+
+def test_bin_layouts_that_used_to_be_guessed_wrong(tmp_path):
+  kitti = np.fromfile(shared_path('kitti_object_velodyne', '000000.bin'), '<f4').reshape(-1, 4)
+  # Intensity in [0, 255] that is not an integer: still xyzi, not 4/3 as many xyz rows.
+  scaled = np.c_[kitti[:, :3], kitti[:, 3] * 255 + 0.37].astype('<f4')
+  scaled.tofile(tmp_path / 'scaled.bin')
+  np.testing.assert_array_equal(io.read_cloud(tmp_path / 'scaled.bin'), kitti[:, :3])
+  # Integer, non-negative coordinates in an N x 3 file (N divisible by 4): xyz, because
+  # column 4 of a 4-wide reading is distributed like the coordinates.
+  grid = np.round(kitti[:, :3] * 5)
+  grid = (grid - grid.min(axis=0))[: len(grid) // 4 * 4].astype('<f4')
+  grid.tofile(tmp_path / 'grid.bin')
+  assert io.read_cloud(tmp_path / 'grid.bin').shape == grid.shape
+  # Float64 rows named as float32 (or the reverse) are refused, not read as garbage.
+  kitti[:, :3].astype('<f8').tofile(tmp_path / 'wide.bin')
+  with pytest.raises(io.CloudFileError, match=r"read as 'xyz' it holds .*wrong --format"):
+    io.read_cloud(tmp_path / 'wide.bin', 'xyz')
+  kitti[: len(kitti) // 2 * 2, :3].tofile(tmp_path / 'narrow.bin')
+  with pytest.raises(io.CloudFileError, match="read as 'xyz64'"):
+    io.read_cloud(tmp_path / 'narrow.bin', 'xyz64')
+  # Bytes that are no cloud in any layout: every layout tried is named with its reason.
+  np.random.default_rng(0).integers(0, 256, 48_000, np.uint8).tofile(tmp_path / 'noise.bin')
+  with pytest.raises(io.CloudFileError, match=r'fit no .bin layout \(xyzn: .*xyz64: '):
+    io.read_cloud(tmp_path / 'noise.bin')
 
 
 def test_truncated_real_file_is_reported(tmp_path):

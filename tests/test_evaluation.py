@@ -276,7 +276,8 @@ def test_learning_curve_rows_resume_and_cli(synthetic_root, tiny_checkpoint, tmp
   assert '| oxford | tiny | 4 | iss+ours |' in (out / 'learning_curve.md').read_text()
   bad = subprocess.run(
       [sys.executable, '-m', 'experiments.learning_curve', f'--run={tiny_checkpoint}',
-       f'--out={out}', '--steps=3'], cwd=ROOT, capture_output=True, text=True, timeout=300)
+       f'--out={out}', '--steps=3', f'--set=oxford={synthetic_root / "test_oxford"}'],
+      cwd=ROOT, capture_output=True, text=True, timeout=300)
   assert bad.returncode != 0 and 'no checkpoint at steps [3]' in bad.stderr
   assert 'Traceback' not in bad.stderr
 

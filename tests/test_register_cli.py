@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 
+from ssd_jax import geometry
 from ssd_jax.data import benchmarks, io
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -38,10 +39,10 @@ def test_register_cli_fpfh_on_a_synthetic_pair(tiny_set, tmp_path):
   folder = tiny_set / 'test_kitti' / '00'
   pair = benchmarks.read_registration_set(folder)[0]
   out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
-             f'--groundtruth={folder / "groundtruths.txt"}', f'--json={tmp_path / "r.json"}',
+             f'--groundtruth={folder / "groundtruths.txt"}', f'--json={tmp_path / "new" / "r.json"}',
              f'--plot={tmp_path / "r.png"}', '--fpfh_max_nn=200')
   assert out.returncode == 0, out.stderr[-3000:]
-  result = json.loads((tmp_path / 'r.json').read_text())
+  result = json.loads((tmp_path / 'new' / 'r.json').read_text())
   t = np.array(result['T_12'])
   assert t.shape == (4, 4) and result['errors']['success'], result
   np.testing.assert_allclose(t[:3, 3], pair.transform[:3, 3], atol=1.0)
@@ -59,6 +60,14 @@ def test_register_cli_errors(tiny_set, tmp_path):
              '--descriptor=learned', f'--checkpoint={tmp_path / "none"}')
   assert out.returncode != 0 and 'none: no such checkpoint directory' in out.stderr
   assert 'Traceback' not in out.stderr
+  # An output path that cannot be written fails before the work, not after it.
+  (tmp_path / 'a_file').write_text('')
+  out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={cloud}',
+             f'--json={tmp_path / "a_file" / "r.json"}')
+  assert out.returncode != 0 and 'cannot create the folder of' in out.stderr
+  assert '==' not in out.stdout and 'Traceback' not in out.stderr
+  out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={cloud}', '--format=xyzq')
+  assert out.returncode != 0 and 'Traceback' not in out.stderr
 
 
 def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
@@ -69,7 +78,7 @@ def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
              '--descriptor=learned', f'--groundtruth={folder / "groundtruths.txt"}',
              f'--json={tmp_path / "r.json"}')
   assert out.returncode == 0, out.stderr[-3000:]
-  result = json.loads((tmp_path / 'r.json').read_text())
+  result = json.loads((tmp_path / 'new' / 'r.json').read_text())
   assert result['descriptor'] == 'learned' and result['model'] == 'ours'
   assert result['errors']['success'], result
 
@@ -108,3 +117,86 @@ def test_register_cli_on_real_pairs(names, descriptor, tmp_path):
   err = metrics.registration_errors(np.array(icp['T_12']), ransac_t)
   assert icp['icp_fitness'] > 0.8 and icp['overlap_fitness'] > 0.7
   assert err['success'] and err['rte'] < 1.0, err
+
+
+_FUZZ_DRIVER = '''
+import json, sys
+from absl import flags
+from experiments import register
+results = []
+for args in json.loads(sys.argv[1]):
+  flags.FLAGS.unparse_flags()
+  flags.FLAGS(['register', *args])
+  try:
+    register.main(['register'])
+    results.append({'code': 0})
+  except SystemExit as e:
+    results.append({'code': e.code if isinstance(e.code, int) else 1, 'message': str(e.code)})
+print(json.dumps(results))
+'''
+
+
+def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set, tmp_path):
+  """A table of damaged, odd and far-away files through `register` (one process): each
+  ends in a one-line error or in a correct transform, never in exit 0 with a wrong one."""
+  pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
+  c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
+  rng = np.random.default_rng(0)
+  utm = np.array([4.5e5, 5.4e6, 30.0])
+
+  def write(name, data):
+    path = tmp_path / name
+    if name.endswith('.npy'):
+      np.save(path, data)
+    elif name.endswith('.ply'):
+      import open3d as o3d  # pylint: disable=g-import-not-at-top
+      o3d.io.write_point_cloud(str(path), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(data)))
+    elif isinstance(data, bytes):
+      path.write_bytes(data)
+    else:
+      data.tofile(path)
+    return str(path)
+
+  good = write('good.bin', c1.astype('<f4'))
+  bad = {   # name -> (cloud 1, the one-line message expected)
+      'empty.bin': (write('empty.bin', b''), 'file is empty'),
+      'cut.bin': (write('cut.bin', c1.astype('<f4').tobytes()[:-2]), 'not a whole number'),
+      'noise.bin': (write('noise.bin', rng.integers(0, 256, 48_000, np.uint8).tobytes()),
+                    'fit no .bin layout'),
+      'far32.bin': (write('far32.bin', (c1 + 2e7).astype('<f4')), 'float32 resolves only 2 m'),
+      'nan.npy': (write('nan.npy', np.full((100, 3), np.nan)), 'no finite points'),
+      'flat.npy': (write('flat.npy', np.zeros((100, 2))), 'expected an [N, >=3] array'),
+      'same.npy': (write('same.npy', np.ones((100, 3))), 'all 100 points coincide'),
+      'few.npy': (write('few.npy', c1[:5]), 'keypoints: found'),
+      'plane.npy': (write('plane.npy', np.c_[rng.uniform(-20, 20, (5000, 2)), np.zeros(5000)]),
+                    'keypoints: found'),
+      'cloud.txt': (write('cloud.txt', b'1 2 3\n'), 'unsupported file type'),
+  }
+  good_pairs = {   # name -> (cloud 1, cloud 2, T_12 expected)
+      'float64 rows': (write('a64.bin', c1.astype('<f8')), write('b64.bin', c2.astype('<f8')),
+                       pair.transform),
+      'intensity 0-255': (write('ai.bin', np.c_[c1, rng.uniform(0, 255, len(c1))].astype('<f4')),
+                          write('bi.bin', np.c_[c2, rng.uniform(0, 255, len(c2))].astype('<f4')),
+                          pair.transform),
+      'UTM .ply': (write('a.ply', c1 + utm), write('b.ply', c2 + utm),
+                   geometry.make_transform(np.eye(3), utm) @ pair.transform @
+                   geometry.make_transform(np.eye(3), -utm)),
+  }
+  cases = [[f'--cloud1={path}', f'--cloud2={good}'] for path, _ in bad.values()]
+  cases += [[f'--cloud1={a}', f'--cloud2={b}', f'--json={tmp_path / f"{i}.json"}',
+             '--fpfh_max_nn=200'] for i, (a, b, _) in enumerate(good_pairs.values())]
+  run = subprocess.run([sys.executable, '-c', _FUZZ_DRIVER, json.dumps(cases)], cwd=ROOT,
+                       capture_output=True, text=True, timeout=900)
+  assert run.returncode == 0, run.stderr[-3000:]
+  results = json.loads(run.stdout.strip().splitlines()[-1])
+  for (name, (_, message)), result in zip(bad.items(), results):
+    assert result['code'] != 0, name
+    assert result['message'].startswith('error: ') and message in result['message'], (name, result)
+    assert '\n' not in result['message'], name
+  for i, ((name, (_, b, t_gt)), result) in enumerate(zip(good_pairs.items(), results[len(bad):])):
+    assert result['code'] == 0, (name, result)
+    t = np.array(json.loads((tmp_path / f'{i}.json').read_text())['T_12'])
+    src = io.read_cloud(b).astype(np.float64)
+    moved = lambda m: src @ m[:3, :3].T + m[:3, 3]
+    err = np.linalg.norm(moved(t) - moved(t_gt), axis=1)
+    assert np.median(err) < 0.5 and err.max() < 2.0, (name, np.median(err), err.max())

@@ -135,3 +135,46 @@ def test_fpfh_follows_the_keypoint_order():
   ref = features.fpfh(pts, np.array([3, 7, 500, 1200]), radius=2.0)
   np.testing.assert_array_equal(ordered, ref[[2, 0, 3, 1, 0]])
   assert np.abs(ref[0] - ref[1]).sum() > 1.0
+
+
+def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
+  """UTM-scale float64 clouds are centred in float64 before any float32 step: the same
+  pair lands the same way at x = 4.5e5, y = 5.4e6 as near the origin, and T comes back
+  in the caller's coordinates."""
+  from ssd_jax.data import benchmarks  # pylint: disable=g-import-not-at-top
+  from ssd_jax.registration import pipeline  # pylint: disable=g-import-not-at-top
+  pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
+  c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
+  errors = []
+  for offset in (np.zeros(3), np.array([4.5e5, 5.4e6, 30.0])):
+    shift = geometry.make_transform(np.eye(3), offset)
+    t_gt = shift @ pair.transform @ geometry.invert_transform(shift)
+    reg, f1, _ = pipeline.register(c1 + offset, c2 + offset, fpfh_max_nn=200)
+    moved = lambda t: (c2 + offset) @ t[:3, :3].T + t[:3, 3]
+    errors.append(np.linalg.norm(moved(reg.transform) - moved(t_gt), axis=1))
+    assert np.abs(f1.xyz - offset).max() < 100   # keypoints in the caller's coordinates
+  near, far = errors
+  assert np.median(near) < 0.5, np.median(near)
+  np.testing.assert_allclose(far, near, atol=0.01)
+
+
+def test_pipeline_refuses_bad_clouds_with_one_line():
+  from ssd_jax.data import pipeline as data_pipeline  # pylint: disable=g-import-not-at-top
+  from ssd_jax.registration import pipeline  # pylint: disable=g-import-not-at-top
+  pts = np.random.default_rng(0).normal(size=(500, 3)) * 5
+  with_nan = pts.copy()
+  with_nan[3] = np.nan
+  for bad, message in ((with_nan, '1 points have NaN/Inf'), (np.zeros((0, 3)), 'empty'),
+                       (pts[:, :2], r'shape \[N, 3\]'),
+                       (pts + 5.4e6, 'float32 resolves only 0.5 m; subtract an offset'),
+                       (pts[:5] * 0.01, r'found \d in a cloud of 5 points')):
+    with pytest.raises(ValueError, match=message):
+      pipeline.cloud_features(bad, fpfh_max_nn=50)
+  for idx in (np.array([0, 500]), np.array([[1, 2]]), np.array([0.5])):
+    with pytest.raises(ValueError, match='keypoint_idx must be'):
+      pipeline.compute_descriptors(pts, idx, 'fpfh')
+  # Coordinates that even their own file type cannot resolve: said so, not "degenerate".
+  with pytest.raises(data_pipeline.CloudDataError, match='float32 resolves only 64 m; store it'):
+    data_pipeline.clean_cloud((pts + 1e9).astype(np.float32), 'far')
+  far = data_pipeline.clean_cloud(pts + 1e9, 'far', np.float64)
+  assert far.dtype == np.float64 and np.ptp(far - 1e9) > 10

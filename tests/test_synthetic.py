@@ -140,6 +140,33 @@ def test_kitti_style_clouds_have_normals_and_poses(tiny_set):
                              np.broadcast_to(np.eye(3), (len(poses), 3, 3)), atol=1e-6)
 
 
+def test_kitti_style_random_yaw_turns_scans_and_keeps_ground_truth(tiny_set, tmp_path):
+  config = tiny_config()
+  config.train.num_scenes = config.test_oxford.num_scenes = config.clusters.num_scenes = 0
+  config.test_kitti.random_yaw = True
+  dataset.generate(config, tmp_path / 'yaw')
+  plain_dir, yaw_dir = tiny_set / 'test_kitti' / '00', tmp_path / 'yaw' / 'test_kitti' / '00'
+  plain = groundtruth.read_groundtruths(plain_dir / 'groundtruths.txt')
+  turned = groundtruth.read_groundtruths(yaw_dir / 'groundtruths.txt')
+  assert [(p.idx1, p.idx2) for p in plain] == [(p.idx1, p.idx2) for p in turned]
+  yaws = []
+  for p, q in zip(plain, turned):
+    a1, a2, b1, b2 = (io.read_cloud(d / f'{i:06d}.bin')[:, :3] for d, i in (
+        (plain_dir, p.idx1), (plain_dir, p.idx2), (yaw_dir, q.idx1), (yaw_dir, q.idx2)))
+    assert len(a2) == len(b2)
+    # Scan 1 is the plain one turned about z through the sensor: same ranges and heights.
+    np.testing.assert_allclose(np.linalg.norm(b1[:, :2], axis=1),
+                               np.linalg.norm(a1[:, :2], axis=1), atol=1e-4)
+    np.testing.assert_allclose(b1[:, 2], a1[:, 2], atol=1e-5)
+    turn = np.linalg.lstsq(a1, b1, rcond=None)[0].T
+    # Scan 2 under the new ground truth lands where the plain scan 2 lands, turned alike.
+    np.testing.assert_allclose(geometry.apply_transform(q.transform, b2),
+                               geometry.apply_transform(p.transform, a2) @ turn.T, atol=1e-3)
+    yaws.append(np.degrees(np.arctan2(q.transform[1, 0], q.transform[0, 0])))
+  # The pairs' relative yaws are spread, no longer near 0 or 180 degrees only.
+  assert np.ptp(np.abs(yaws)) > 60, yaws
+
+
 def test_oxford_style_models(tiny_set):
   root = tiny_set / 'test_oxford'
   pairs = groundtruth.read_groundtruths(root / 'groundtruths.txt')

@@ -1,8 +1,10 @@
 """Point-cloud file readers (host side, numpy) with clear errors for bad files.
 
 Supported:
-  * `.bin` float32 rows: 3DFeat-Net `xyzn` (N x 6: x y z nx ny nz), KITTI
-    velodyne `xyzi` (N x 4: x y z reflectance) or plain `xyz` (N x 3);
+  * `.bin` rows of float32: 3DFeat-Net `xyzn` (N x 6: x y z nx ny nz), KITTI
+    velodyne `xyzi` (N x 4: x y z reflectance) or plain `xyz` (N x 3), or the same
+    layouts in float64 (`xyzn64`, `xyzi64`, `xyz64`); detected from the bytes
+    (`detect_bin_format`, which refuses rather than guesses) or named;
   * `.npy` arrays [N, >=3];
   * `.ply` and `.pcd` through Open3D;
   * the 3DFeat-Net Oxford training index `train.txt`
@@ -16,9 +18,21 @@ import os
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
-BIN_FORMATS = {'xyz': 3, 'xyzi': 4, 'xyzn': 6}
+# .bin row layouts: name -> (little-endian dtype, columns). The first three columns are
+# x y z in metres; `i` is an intensity / reflectance, `n` a unit normal.
+BIN_FORMATS = {
+    'xyz': ('<f4', 3), 'xyzi': ('<f4', 4), 'xyzn': ('<f4', 6),
+    'xyz64': ('<f8', 3), 'xyzi64': ('<f8', 4), 'xyzn64': ('<f8', 6),
+}
+# Auto-detection prefers the layout whose extra columns carry evidence (normals, then
+# an intensity) over plain xyz, which any byte count divisible by 12 also fits.
+_PREFERENCE = ('xyzn', 'xyzn64', 'xyzi', 'xyzi64', 'xyz', 'xyz64')
 CLOUD_SUFFIXES = ('.bin', '.npy', '.ply', '.pcd')
+# Metres. Beyond it a value is read garbage, not a coordinate (UTM northings are ~1e7).
+MAX_COORDINATE = 1e8
+_DETECT_ROWS = 8192
 
 
 class CloudFileError(ValueError):
@@ -36,35 +50,91 @@ def _looks_like_normals(rows: np.ndarray) -> bool:
   return bool(np.mean(norms <= 1.01) > 0.99 and np.median(norms) > 0.9)
 
 
-def _looks_like_intensity(rows: np.ndarray) -> bool:
-  """Column 3 of a candidate N x 4 file is a reflectance in [0, 1] (KITTI) or [0, 255]."""
-  col = rows[:, 3]
-  col = col[np.isfinite(col)]
-  return col.size > 0 and (bool(np.all((col >= 0) & (col <= 1))) or
-                           bool(np.all((col >= 0) & (col <= 255) & (col == np.round(col)))))
+def _coordinate_problem(xyz: np.ndarray) -> str | None:
+  """Why columns 0:3 [N, 3] (float64) cannot be metres, or None. Bytes of another
+  type or width read as floats give non-finite, astronomically large or denormal-small
+  values."""
+  finite = np.isfinite(xyz).all(axis=1)
+  if finite.mean() < 0.99:
+    return f'{100 * (1 - finite.mean()):.0f} % of the rows are not finite'
+  mag = np.abs(xyz[finite])
+  if mag.size and mag.max() > MAX_COORDINATE:
+    return f'coordinates up to {mag.max():.1e} m'
+  if np.mean((mag > 0) & (mag < 1e-6)) > 0.01:
+    return 'coordinates below a micrometre'
+  return None
 
 
-def detect_bin_format(raw: np.ndarray, path: str | os.PathLike) -> str:
-  """Guess the row layout of a float32 `.bin` from its size and contents."""
-  candidates = [f for f, w in BIN_FORMATS.items() if raw.size % w == 0]
-  if not candidates:
-    raise CloudFileError(
-        f'{path}: {raw.size * 4} bytes is not a whole number of float32 rows of width 3, 4 '
-        f'or 6 (truncated file?)')
-  sample = slice(0, min(raw.size, 6 * 4096))
-  if 'xyzn' in candidates and _looks_like_normals(raw[sample].reshape(-1, 6)):
-    return 'xyzn'
-  if 'xyzi' in candidates and _looks_like_intensity(raw[: min(raw.size, 4 * 4096)].reshape(-1, 4)):
-    return 'xyzi'
-  if 'xyz' in candidates:
-    return 'xyz'
-  raise CloudFileError(
-      f'{path}: cannot tell the row layout ({raw.size * 4} bytes); pass the format '
-      f"explicitly (one of {sorted(BIN_FORMATS)})")
+def _layout_problem(rows: np.ndarray, fmt: str) -> str | None:
+  """Why the sampled rows [M, columns] (float64) of layout `fmt` are implausible, or
+  None when they look like a point cloud in that layout."""
+  problem = _coordinate_problem(rows[:, :3])
+  if problem:
+    return problem
+  rows = rows[np.isfinite(rows[:, :3]).all(axis=1)]
+  xyz = rows[:, :3]
+  width = rows.shape[1]
+  if width == 3 and np.mean(np.abs(np.linalg.norm(xyz, axis=1) - 1) < 0.01) > 0.2:
+    return 'a fifth of the rows are unit vectors (normals of an N x 6 file?)'
+  if width == 6 and not _looks_like_normals(rows):
+    return 'columns 4-6 are not unit normals'
+  if width == 4:
+    value = rows[:, 3]
+    if not np.isfinite(value).all() or value.min() < 0 or value.max() > 65535:
+      return (f'column 4 spans [{np.nanmin(value):.3g}, {np.nanmax(value):.3g}], not an '
+              'intensity')
+    # An N x 3 file read 4 columns wide puts coordinates in column 4: it is then
+    # distributed like the coordinates, which an intensity never is.
+    if stats.ks_2samp(value, xyz.ravel()).statistic < 0.1:
+      return 'column 4 is distributed like the coordinates, not like an intensity'
+  return None
+
+
+def _sample_rows(data: np.ndarray, fmt: str) -> np.ndarray | None:
+  """Up to _DETECT_ROWS rows spread over the file, as float64, or None when the byte
+  count is not a whole number of `fmt` rows."""
+  dtype, width = BIN_FORMATS[fmt]
+  row_bytes = np.dtype(dtype).itemsize * width
+  if data.size % row_bytes:
+    return None
+  rows = data.view(dtype).reshape(-1, width)
+  pick = np.unique(np.linspace(0, len(rows) - 1, min(len(rows), _DETECT_ROWS)).astype(int))
+  with np.errstate(all='ignore'):
+    return rows[pick].astype(np.float64)
+
+
+def detect_bin_format(data: np.ndarray, path: str | os.PathLike) -> str:
+  """The row layout of a `.bin` file's bytes (any array, read as raw bytes): the one
+  layout of BIN_FORMATS whose sampled rows are plausible, preferring layouts whose
+  extra columns look like normals or an intensity. Raises CloudFileError naming every
+  layout tried and why it was refused, or the layouts it cannot tell apart."""
+  data = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
+  plausible, refused = [], []
+  for fmt in _PREFERENCE:
+    rows = _sample_rows(data, fmt)
+    problem = ('not a whole number of rows' if rows is None else
+               'no rows' if not len(rows) else _layout_problem(rows, fmt))
+    if problem:
+      refused.append(f'{fmt}: {problem}')
+    else:
+      plausible.append(fmt)
+  if not plausible:
+    raise CloudFileError(f'{path}: {data.size} bytes fit no .bin layout ({"; ".join(refused)}); '
+                         f'truncated or not a point cloud? --format names one of '
+                         f'{sorted(BIN_FORMATS)}')
+  dtypes = {BIN_FORMATS[f][0] for f in plausible}
+  if len(dtypes) > 1:
+    raise CloudFileError(f'{path}: cannot tell float32 from float64 rows (both {plausible} '
+                         'look plausible); pass the layout with --format')
+  return plausible[0]
 
 
 def read_bin(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
-  """Read a float32 `.bin` cloud -> xyz [N, 3] float32 metres."""
+  """Read a `.bin` cloud -> xyz [N, 3] metres: float32 for the float32 layouts, float64
+  for the `*64` ones (so that far-from-origin coordinates keep their precision).
+
+  fmt: 'auto' (detect_bin_format) or a key of BIN_FORMATS. A named layout is still
+  checked for values no point cloud holds (bytes of another type)."""
   if fmt != 'auto' and fmt not in BIN_FORMATS:
     raise CloudFileError(f"unknown .bin format {fmt!r}; use 'auto' or one of {sorted(BIN_FORMATS)}")
   size = os.path.getsize(path)
@@ -73,17 +143,29 @@ def read_bin(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
   if size % 4:
     raise CloudFileError(f'{path}: {size} bytes is not a whole number of float32 values '
                          '(truncated file?)')
-  raw = np.fromfile(path, dtype='<f4')
-  fmt = detect_bin_format(raw, path) if fmt == 'auto' else fmt
-  width = BIN_FORMATS[fmt]
-  if raw.size % width:
-    raise CloudFileError(f'{path}: {size} bytes is not a whole number of {width}-column '
-                         f"float32 rows (format {fmt!r}); truncated file or wrong format?")
-  return np.ascontiguousarray(raw.reshape(-1, width)[:, :3])
+  data = np.fromfile(path, dtype=np.uint8)
+  if fmt == 'auto':
+    fmt = detect_bin_format(data, path)
+  else:
+    rows = _sample_rows(data, fmt)
+    dtype, width = BIN_FORMATS[fmt]
+    if rows is None:
+      raise CloudFileError(f'{path}: {size} bytes is not a whole number of {width}-column '
+                           f'{np.dtype(dtype).name} rows (format {fmt!r}); truncated file or '
+                           'wrong format?')
+    problem = _coordinate_problem(rows[:, :3])
+    if problem:
+      raise CloudFileError(f'{path}: read as {fmt!r} it holds {problem}: wrong --format?')
+  dtype, width = BIN_FORMATS[fmt]
+  return np.ascontiguousarray(data.view(dtype).reshape(-1, width)[:, :3]).astype(
+      np.dtype(dtype).newbyteorder('='))
 
 
 def read_cloud(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
-  """Read any supported cloud file -> xyz [N, 3] float32 metres (may hold NaN rows)."""
+  """Read any supported cloud file -> xyz [N, 3] metres (may hold NaN rows): float32,
+  or float64 where the file stores float64 (`*64` .bin layouts, float64 .npy, and
+  .ply/.pcd, which Open3D reads as float64), so far-from-origin coordinates keep
+  their precision until a caller centres them."""
   path = Path(path)
   if not path.is_file():
     raise CloudFileError(f'{path}: no such file')
@@ -97,13 +179,14 @@ def read_cloud(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
       raise CloudFileError(f'{path}: not a readable .npy array ({e})') from None
     if arr.ndim != 2 or arr.shape[1] < 3:
       raise CloudFileError(f'{path}: expected an [N, >=3] array, got shape {arr.shape}')
-    return np.ascontiguousarray(arr[:, :3], dtype=np.float32)
+    wide = arr.dtype == np.float64
+    return np.ascontiguousarray(arr[:, :3], dtype=np.float64 if wide else np.float32)
   if suffix in ('.ply', '.pcd'):
     import open3d as o3d  # pylint: disable=g-import-not-at-top
     if path.stat().st_size == 0:
       raise CloudFileError(f'{path}: file is empty')
     pcd = o3d.io.read_point_cloud(str(path))
-    pts = np.asarray(pcd.points, dtype=np.float32)
+    pts = np.asarray(pcd.points, dtype=np.float64)
     if pts.size == 0:
       raise CloudFileError(f'{path}: Open3D read no points (empty or unreadable {suffix} file)')
     return pts

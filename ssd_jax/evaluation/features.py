@@ -19,6 +19,7 @@ import numpy as np
 
 from ssd_jax import pretrained
 from ssd_jax.data import io, pipeline as data_pipeline
+from ssd_jax.evaluation import fingerprint
 from ssd_jax.registration import features as features_lib, pipeline
 
 BUILTIN_KEYPOINTS = ('iss', 'random')
@@ -127,6 +128,20 @@ class FeatureStore:
       self._descriptors[key] = d
     return pipeline.CloudFeatures(self.cloud(path)[self.keypoints(path, kp)],
                                   self._descriptors[key], {})
+
+  def fingerprints(self) -> dict[str, str]:
+    """A digest per stage of what was computed: the clouds as read, the keypoints of
+    each source and the descriptors of each row, over the files in sorted order."""
+    out = {'clouds (as read)': fingerprint.digest(self._clouds[k] for k in sorted(self._clouds))}
+    for source in sorted({s for _, s in self._keypoints}):
+      keys = sorted(k for k in self._keypoints if k[1] == source)
+      out[f'keypoints: {source}'] = fingerprint.digest(self._keypoints[k] for k in keys)
+    for kp, desc in sorted({k[1:] for k in self._descriptors}):
+      keys = sorted(k for k in self._descriptors if k[1:] == (kp, desc))
+      out[f'descriptors: {kp}+{desc}'] = fingerprint.digest(self._descriptors[k] for k in keys)
+    for name, model in sorted(self.models.items()):
+      out[f'weights: {name}'] = fingerprint.params_digest(model.variables)
+    return out
 
   def _model(self, name: str):
     if name not in self.models:

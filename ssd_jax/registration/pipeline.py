@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from ssd_jax.data.pipeline import check_cloud
 from ssd_jax.registration import features, keypoints as keypoints_lib, matching, ransac
 
 KEYPOINTS = ('iss', 'learned', 'random')
@@ -33,12 +34,14 @@ class Registration:
   inliers: np.ndarray      # [K1] bool
   trials: int
   seconds: dict
+  icp_fitness: float | None = None   # share of cloud-2 points with an ICP partner
 
 
 def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0,
                       num_random: int = 1024) -> np.ndarray:
   """Keypoint indices into points [N, 3]: ISS (docs/method.md §4), learned attention +
   NMS (needs a detector-trained `inference.Model`), or `num_random` random points."""
+  points = check_cloud(points)
   if method == 'iss':
     return keypoints_lib.iss(points)
   if method == 'random':
@@ -55,6 +58,13 @@ def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: st
                         model=None, search: str = 'kdtree',
                         fpfh_max_nn: int = features.FPFH_MAX_NN) -> np.ndarray:
   """[K, D] descriptors at points[keypoint_idx]: FPFH (docs/method.md §4) or learned."""
+  points = check_cloud(points)
+  keypoint_idx = np.asarray(keypoint_idx)
+  if keypoint_idx.ndim != 1 or (keypoint_idx.size and not (
+      np.issubdtype(keypoint_idx.dtype, np.integer) and 0 <= keypoint_idx.min()
+      and keypoint_idx.max() < len(points))):
+    raise ValueError(f'keypoint_idx must be [K] integer indices into the {len(points)} '
+                     f'points, got shape {keypoint_idx.shape} dtype {keypoint_idx.dtype}')
   if method == 'fpfh':
     return features.fpfh(points, keypoint_idx, max_nn=fpfh_max_nn)
   if method == 'learned':
@@ -68,8 +78,15 @@ def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: st
 def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str = 'fpfh',
                    model=None, seed: int = 0,
                    fpfh_max_nn: int = features.FPFH_MAX_NN) -> CloudFeatures:
+  """Keypoints of points [N, 3] (finite metres, within float32's centimetre range of the
+  origin) and their descriptors. Raises ValueError on a malformed cloud or when the
+  detector finds fewer than 3 keypoints."""
+  points = check_cloud(points)
   t0 = time.perf_counter()
   idx = compute_keypoints(points, keypoints, model, seed)
+  if len(idx) < 3:
+    raise ValueError(f'{keypoints} keypoints: found {len(idx)} in a cloud of {len(points)} '
+                     'points, 3 are needed (too sparse, or planar / collinear?)')
   t1 = time.perf_counter()
   desc = compute_descriptors(points, idx, descriptor, model, fpfh_max_nn=fpfh_max_nn)
   t2 = time.perf_counter()
@@ -91,6 +108,37 @@ def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_thresho
   t2 = time.perf_counter()
   return Registration(res.transform, np.stack([np.arange(len(nn)), nn], 1), res.inliers,
                       res.trials, {'matching': t1 - t0, 'ransac': t2 - t1})
+
+
+def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
+             descriptor: str = 'fpfh', model=None, seed: int = 0,
+             fpfh_max_nn: int = features.FPFH_MAX_NN, icp: bool = False,
+             ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
+  """The whole pipeline on two clouds, in the caller's coordinates.
+
+  points1 (target) [N1, 3] and points2 (source) [N2, 3] metres, any float type. Both
+  are shifted by one common offset (cloud 1's centroid, in float64) before any float32
+  step, so clouds far from the origin (UTM coordinates) register as accurately as
+  near it; the returned transform T_12 and keypoints are in the input coordinates.
+  -> (registration, features of cloud 1, features of cloud 2).
+  """
+  clouds = [check_cloud(p, name, np.float64) for p, name in ((points1, 'cloud 1'),
+                                                             (points2, 'cloud 2'))]
+  offset = clouds[0].mean(axis=0)
+  local = [check_cloud(c - offset, name) for c, name in zip(clouds, ('cloud 1', 'cloud 2'))]
+  f1, f2 = (cloud_features(c, keypoints, descriptor, model, seed, fpfh_max_nn) for c in local)
+  reg = estimate(f1, f2, seed)
+  transform = reg.transform
+  if icp:
+    t0 = time.perf_counter()
+    transform, reg.icp_fitness = refine_icp(local[0], local[1], transform)
+    reg.seconds['icp'] = time.perf_counter() - t0
+  # T in centred coordinates maps p - o to q - o; in the caller's: q = R p + t + o - R o.
+  to_local = np.eye(4)
+  to_local[:3, 3] = -offset
+  reg.transform = np.linalg.inv(to_local) @ transform @ to_local
+  f1.xyz, f2.xyz = (f.xyz.astype(np.float64) + offset for f in (f1, f2))
+  return reg, f1, f2
 
 
 def refine_icp(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,

@@ -153,17 +153,30 @@ def _write_train(config, out: Path, tick: Callable[[], None]) -> int:
 
 
 def _write_test_kitti(config, out: Path, tick) -> int:
+  """KITTI-style sequences in the sensor frame. With `test_kitti.random_yaw` each scan
+  is also turned about the sensor's z axis by its own uniform yaw (poses.txt and the
+  ground truth follow), so the relative yaw of the pairs covers the whole circle
+  instead of the ~0 and ~180 degrees of two passes along a street."""
   cfg, num_pairs = config.test_kitti, 0
   for seq in range(cfg.num_scenes):
     drive = make_drive(config, 'test_kitti', seq)
     folder = out / 'test_kitti' / f'{seq:02d}'
     folder.mkdir(parents=True)
-    kitti.write_poses(folder / 'poses.txt', drive.poses)
+    rng = np.random.default_rng((*drive.seed, _MODEL_ROTATION_STREAM))
+    frames = []   # T_world_written of each scan
     for k in range(len(drive.poses)):
       points, normals = process(config, drive.scan(k))
+      frame = drive.poses[k]
+      if cfg.random_yaw:
+        rot = geometry.rotation_z(rng.uniform(-np.pi, np.pi))
+        points, normals = points @ rot.T, normals @ rot.T
+        frame = frame @ geometry.make_transform(rot.T, np.zeros(3))
       io.write_bin(folder / f'{k:06d}.bin', points, normals)
+      frames.append(frame)
       tick()
-    pairs = [groundtruth.GroundTruthPair(i, j, groundtruth.relative_pose(drive.poses, i, j))
+    frames = np.stack(frames)
+    kitti.write_poses(folder / 'poses.txt', frames)
+    pairs = [groundtruth.GroundTruthPair(i, j, groundtruth.relative_pose(frames, i, j))
              for i, j in groundtruth.close_pairs(drive.positions, cfg.pair_max_distance)]
     groundtruth.write_groundtruths(folder / 'groundtruths.txt', pairs)
     num_pairs += len(pairs)
