@@ -2,6 +2,7 @@
 
 import filecmp
 import os
+import shutil
 import subprocess
 import sys
 
@@ -203,12 +204,25 @@ def test_cluster_pairs(tiny_set):
       assert len(pts) >= 16 and np.linalg.norm(pts, axis=1).max() < 4.0
 
 
-def test_reuse_and_config_errors(tiny_set):
+def test_reuse_and_config_errors(tiny_set, tmp_path):
   before = (tiny_set / 'synthetic.json').stat().st_mtime_ns
   assert dataset.generate(tiny_config(), tiny_set)['reused']
   assert (tiny_set / 'synthetic.json').stat().st_mtime_ns == before
   with pytest.raises(dataset.SyntheticConfigError, match='different config'):
     dataset.generate(tiny_config(seed=3), tiny_set)
+  # A dataset written before a config key existed is reused while the key keeps the value
+  # it implied, and refused when the config asks for another.
+  import json  # pylint: disable=g-import-not-at-top
+  old = tmp_path / 'old'
+  shutil.copytree(tiny_set, old)
+  manifest = json.loads((old / 'synthetic.json').read_text())
+  del manifest['config']['test_kitti']['random_yaw']
+  (old / 'synthetic.json').write_text(json.dumps(manifest))
+  assert dataset.generate(tiny_config(), old)['reused']
+  turned = tiny_config()
+  turned.test_kitti.random_yaw = True
+  with pytest.raises(dataset.SyntheticConfigError, match='different config'):
+    dataset.generate(turned, old)
   bad = tiny_config()
   bad.test_kitti.spacing = -1.0
   with pytest.raises(dataset.SyntheticConfigError, match=r'test_kitti.spacing must be > 0'):

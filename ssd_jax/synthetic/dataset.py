@@ -319,7 +319,8 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
   settings = json.loads(config.to_json())
   existing = read_manifest(out)
   if existing is not None:
-    if existing['config'] == settings and existing['format_version'] == FORMAT_VERSION:
+    if (_with_added_keys(existing['config']) == settings
+        and existing['format_version'] == FORMAT_VERSION):
       return {**existing, 'reused': True}
     if not overwrite:
       raise SyntheticConfigError(f'{out} holds a synthetic dataset made with a different config '
@@ -345,6 +346,18 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
     shutil.rmtree(out)
   os.replace(partial, out)
   return {**manifest, 'reused': False}
+
+
+# Config keys added after datasets were written, with the value those datasets used:
+# a dataset written before a key existed is reused when the config keeps that value.
+ADDED_KEYS = {('test_kitti', 'random_yaw'): False}
+
+
+def _with_added_keys(settings: dict) -> dict:
+  settings = json.loads(json.dumps(settings))
+  for (section, key), value in ADDED_KEYS.items():
+    settings.get(section, {}).setdefault(key, value)
+  return settings
 
 
 def read_manifest(out: str | os.PathLike) -> dict | None:
