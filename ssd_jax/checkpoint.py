@@ -100,9 +100,10 @@ class Checkpointer:
     _drop_failed_reads()
     raise CheckpointError(f'{self._step_path(step)}: damaged checkpoint ({reason})')
 
-  def restore(self, abstract_state: Any, step: int | None = None) -> tuple[Any, dict]:
+  def restore(self, abstract_state: Any | None, step: int | None = None) -> tuple[Any, dict]:
     """Restore `step` (default latest) into the structure, shapes, dtypes and
-    shardings of `abstract_state` (a pytree of `jax.ShapeDtypeStruct`).
+    shardings of `abstract_state` (a pytree of `jax.ShapeDtypeStruct`), or as stored
+    (nested dicts of arrays) when it is None.
 
     Raises FileNotFoundError when there is no such checkpoint and CheckpointError,
     naming the step's folder, when its files are damaged."""

@@ -79,20 +79,35 @@ def checkpoint_directory(run_dir: str | os.PathLike) -> str:
   return directory
 
 
+def check_variables(variables, model_config, source: str) -> dict:
+  """{'params', 'batch_stats'} of `variables` if their structure and shapes are those of
+  `network.create(model_config)`, else a ValueError naming `source`."""
+  template = network.variables_template(model_config)
+  variables = {k: variables[k] for k in ('params', 'batch_stats') if k in variables}
+  same = (jax.tree.structure(variables) == jax.tree.structure(template) and all(
+      np.shape(a) == b.shape for a, b in zip(jax.tree.leaves(variables),
+                                             jax.tree.leaves(template))))
+  if not same:
+    raise ValueError(f'{source}: not the weights of the network its config describes')
+  return variables
+
+
 def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
-  """The model of a training run: `checkpoint_dir` is its workdir or its `checkpoints/`."""
-  from ssd_jax import train  # pylint: disable=g-import-not-at-top
+  """The model of a training run: `checkpoint_dir` is its workdir or its `checkpoints/`.
+  Only params and BatchNorm statistics are read; a damaged checkpoint is a
+  `checkpoint.CheckpointError` naming its folder."""
   directory = checkpoint_directory(checkpoint_dir)
   ckpt = checkpoint.Checkpointer(directory, asynchronous=False)
   if ckpt.latest_step() is None:
     raise FileNotFoundError(f'{directory}: holds no checkpoint')
-  config = ml_collections.ConfigDict(ckpt.restore_config(step))
-  abstract = checkpoint.abstract_like(
-      jax.eval_shape(lambda: train.create_train_state(config, jax.random.key(0))))
   step = ckpt.latest_step() if step is None else step
-  state, _ = ckpt.restore(abstract, step)
-  ckpt.close()
-  model = Model.from_config(config, {'params': state.params, 'batch_stats': state.batch_stats})
+  try:
+    config = ml_collections.ConfigDict(ckpt.restore_config(step))
+    state, _ = ckpt.restore(None, step)   # as stored: no optimizer template needed
+  finally:
+    ckpt.close()
+  variables = check_variables(state, config.model, f'{directory}/{step}')
+  model = Model.from_config(config, variables)
   return dataclasses.replace(model, step=int(step))
 
 

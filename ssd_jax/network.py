@@ -216,6 +216,14 @@ class FeatureNet(nn.Module):
     return self.descriptor(grouping.rotate_clusters(clusters, angle), train)
 
 
+def variables_template(model_config):
+  """Shapes and dtypes of the variables {'params', 'batch_stats'} of `create(model_config)`
+  (a pytree of `jax.ShapeDtypeStruct`), to check restored weights against."""
+  net = create(model_config)
+  points = jax.ShapeDtypeStruct((1, 1, model_config.num_samples, 3), jnp.float32)
+  return jax.eval_shape(lambda p: net.init(jax.random.key(0), p, train=False), points)
+
+
 def create(model_config) -> FeatureNet:
   """The `FeatureNet` that a config's `model` section describes (the one place it is
   built, for training and inference alike). Fields added after a run was stored

@@ -60,11 +60,9 @@ def load_export(path: str | os.PathLike) -> inference.Model:
   try:
     record = json.loads((path / CONFIG_FILE).read_text())
     config = ml_collections.ConfigDict(record['config'])
-    net = network.create(config.model)
+    template = network.variables_template(config.model)
   except (OSError, ValueError, KeyError, AttributeError) as e:
     raise ValueError(f'{path / CONFIG_FILE}: not a readable model config ({e})') from None
-  template = jax.eval_shape(lambda: net.init(
-      jax.random.key(0), jax.numpy.zeros((1, 1, config.model.num_samples, 3)), train=False))
   template = jax.tree.map(lambda s: jax.numpy.zeros(s.shape, s.dtype), template)
   try:
     variables = flax.serialization.from_bytes(template, (path / WEIGHTS_FILE).read_bytes())

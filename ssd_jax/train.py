@@ -22,8 +22,7 @@ import numpy as np
 import optax
 from tqdm import auto as tqdm
 
-from ssd_jax import augment, checkpoint, losses, network, objective
-from ssd_jax import grouping
+from ssd_jax import augment, checkpoint, grouping, inference, losses, network, objective
 from ssd_jax.data import pipeline
 
 
@@ -305,7 +304,6 @@ def initialize_from(state: TrainState, source: str,
   """3DFeat-Net's stage hand-over: `state` (fresh) with the descriptor weights and
   BatchNorm statistics of the run in `source`; the detector keeps its fresh
   initialisation and the optimizer starts anew."""
-  from ssd_jax import inference  # pylint: disable=g-import-not-at-top
   try:
     src = inference.load(source).variables
   except FileNotFoundError as e:

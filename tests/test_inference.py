@@ -4,7 +4,8 @@ import jax
 import numpy as np
 import pytest
 
-from ssd_jax import grouping, inference, train
+from configs import cpu_small
+from ssd_jax import grouping, inference, network, train
 
 
 @pytest.fixture(scope='module')
@@ -129,3 +130,14 @@ def test_descriptors_averaged_over_draws(model):
                                 inference.describe(dataclasses.replace(model, draws=3), pts, kp))
   with pytest.raises(ValueError, match='draws must be >= 1'):
     inference.describe(dataclasses.replace(model, draws=0), pts, kp)
+
+
+def test_restored_weights_must_fit_the_configured_network():
+  config = cpu_small.get_config()
+  template = network.variables_template(config.model)
+  variables = jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), template)
+  kept = inference.check_variables({**variables, 'opt_state': 1}, config.model, 'run/7')
+  assert jax.tree.structure(kept) == jax.tree.structure(variables)
+  config.model.descriptor_dim = 64
+  with pytest.raises(ValueError, match='run/7: not the weights of the network'):
+    inference.check_variables(variables, config.model, 'run/7')

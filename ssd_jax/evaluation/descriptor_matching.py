@@ -16,6 +16,7 @@ from typing import Mapping, Sequence
 import numpy as np
 from tqdm import auto as tqdm
 
+from ssd_jax import inference
 from ssd_jax.data import clusters as clusters_lib, io, pipeline as data_pipeline
 from ssd_jax.registration import features as features_lib, keypoints
 
@@ -82,7 +83,6 @@ def describe_pairs(pairs: Sequence[clusters_lib.ClusterPair], descriptors: Mappi
   descriptors use the model's own (trained) radius. Clusters are read `block`
   pairs at a time. -> ({name: [P] distances}, [P, 2] ISS center distances).
   """
-  from ssd_jax import inference  # pylint: disable=g-import-not-at-top
   dist = {name: [] for name in descriptors}
   iss_dist = []
   bar = tqdm.tqdm(total=len(pairs), desc='descriptor matching', unit='pair',

@@ -11,7 +11,9 @@ import dataclasses
 import time
 
 import numpy as np
+from scipy import spatial
 
+from ssd_jax import inference
 from ssd_jax.data.pipeline import check_cloud
 from ssd_jax.registration import features, keypoints as keypoints_lib, matching, ransac
 
@@ -49,7 +51,6 @@ def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0
   if method == 'learned':
     if model is None:
       raise ValueError('learned keypoints need a model (--checkpoint)')
-    from ssd_jax import inference  # pylint: disable=g-import-not-at-top
     return inference.detect(model, points)[0]
   raise ValueError(f'keypoints must be one of {KEYPOINTS}, got {method!r}')
 
@@ -70,7 +71,6 @@ def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: st
   if method == 'learned':
     if model is None:
       raise ValueError('learned descriptors need a model (--checkpoint)')
-    from ssd_jax import inference  # pylint: disable=g-import-not-at-top
     return inference.describe(model, points, points[keypoint_idx], search=search)
   raise ValueError(f'descriptor must be one of {DESCRIPTORS}, got {method!r}')
 
@@ -165,7 +165,6 @@ def refine_icp(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
 def overlap_fitness(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
                     max_distance: float = 0.5) -> float:
   """Fraction of cloud-2 points within max_distance of cloud 1 after T_12."""
-  from scipy import spatial  # pylint: disable=g-import-not-at-top
   moved = np.asarray(points2, np.float64) @ transform[:3, :3].T + transform[:3, 3]
   dist, _ = spatial.cKDTree(points1).query(moved, distance_upper_bound=max_distance)
   return float(np.mean(np.isfinite(dist)))

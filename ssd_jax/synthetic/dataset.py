@@ -33,6 +33,7 @@ from scipy import spatial
 
 from ssd_jax import geometry
 from ssd_jax.data import groundtruth, io, kitti, pipeline, preprocess
+from ssd_jax.registration import keypoints
 from ssd_jax.synthetic import lidar, scene as scene_lib, trajectory
 
 SPLITS = {'train': 1, 'test_kitti': 2, 'test_oxford': 3, 'clusters': 4}
@@ -240,7 +241,6 @@ def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
   """Matching pairs: one world point seen from two scans < 10 m apart; non-matching:
   points of two scans at least 20 m apart (docs/method.md §4). Centres are random scan
   points (`clusters.centers='random'`, the paper's) or ISS keypoints ('iss')."""
-  from ssd_jax.registration import keypoints  # pylint: disable=g-import-not-at-top
   cfg = config.clusters
   folder = out / 'clusters'
   folder.mkdir(parents=True)
