@@ -215,17 +215,33 @@ def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, c
   For descriptor-matching sets (docs/method.md §4) of thousands of cluster crops: equal to
   `describe(model, clouds[k], centers[k:k+1], seed=seed)` for every k, without a
   network call per crop. clouds: sequence of [N_k, 3] metres; centers [K, 3] metres
-  (default: each crop's origin) -> [K, D] float32.
+  (default: each crop's origin) -> [K, D] float32, averaged over `model.draws` samplings
+  as `describe` does.
   """
   centers = (np.zeros((len(clouds), 3), np.float32) if centers is None
              else check_cloud(centers, 'centers'))
   if len(centers) != len(clouds):
     raise ValueError(f'{len(clouds)} clouds but {len(centers)} centers')
+  if model.draws < 1:
+    raise ValueError(f'model.draws must be >= 1, got {model.draws}')
+  clouds = [check_cloud(cloud, f'cloud {k}') for k, cloud in enumerate(clouds)]
+  total = 0.0
+  for draw in range(model.draws):
+    order_seed = seed if draw == 0 else (seed, draw)
+    total = total + _describe_clusters_once(model, clouds, centers, chunk, order_seed)
+  if model.draws == 1:
+    return total
+  return (total / np.linalg.norm(total, axis=1, keepdims=True).clip(1e-12)).astype(np.float32)
+
+
+def _describe_clusters_once(model: Model, clouds, centers: np.ndarray, chunk: int,
+                            order_seed) -> np.ndarray:
+  """`describe_clusters` for one sampling of each ball (the clouds in `order_seed`'s order)."""
   c = model.num_samples
   groups = np.zeros((len(clouds), c, 3), np.float32)
   has = np.zeros(len(clouds), bool)
   for k, cloud in enumerate(clouds):
-    pts = shuffled(check_cloud(cloud, f'cloud {k}'), seed)
+    pts = shuffled(cloud, order_seed)
     idx, h = kdtree_neighbourhoods(pts, centers[k:k + 1], model.radius, c)
     groups[k], has[k] = pts[idx[0]], h[0]
   # Each chunk is its own flat "cloud" of chunk * c points whose k-th cluster is rows

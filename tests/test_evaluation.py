@@ -2,6 +2,7 @@
 `experiments.reproduce` end to end on a tiny synthetic data root."""
 
 import csv
+import dataclasses
 import os
 import subprocess
 import sys
@@ -122,6 +123,14 @@ def test_describe_clusters_equals_describe_per_cluster():
   one = np.concatenate([inference.describe(model, c, np.zeros((1, 3), np.float32))
                         for c in clouds])
   np.testing.assert_allclose(batched, one, atol=1e-5)
+  # Averaged over draws alike (the 4th cloud has no neighbour: zero in every draw).
+  model = dataclasses.replace(model, draws=3)
+  batched = inference.describe_clusters(model, clouds[:3], chunk=2)
+  one = np.concatenate([inference.describe(model, c, np.zeros((1, 3), np.float32))
+                        for c in clouds[:3]])
+  np.testing.assert_allclose(batched, one, atol=1e-5)
+  assert np.abs(batched[2] - inference.describe_clusters(
+      dataclasses.replace(model, draws=1), clouds[2:3])[0]).max() > 1e-3
   with pytest.raises(ValueError, match='cloud 1: .* NaN'):
     inference.describe_clusters(model, [clouds[0], np.full((3, 3), np.nan, np.float32)])
 
