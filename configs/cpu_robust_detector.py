@@ -15,6 +15,7 @@ from configs import cpu_robust
 
 def get_config():
   config = cpu_robust.get_config()
+  config.model.radius = 2.0   # the shipped ours_detector was trained on 2 m balls
   config.model.attention_in_cf = True
   config.train.num_steps = 2000
   return config

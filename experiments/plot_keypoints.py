@@ -12,7 +12,7 @@ from absl import app
 from absl import flags
 
 from ssd_jax import cli, viz
-from ssd_jax.data import io, pipeline as data_pipeline
+from ssd_jax.data import clean, io
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import pipeline
 
@@ -34,7 +34,7 @@ def main(argv):
   if 'learned' in FLAGS.sources and not FLAGS.checkpoint:
     raise SystemExit('error: learned keypoints need --checkpoint')
   try:
-    points = data_pipeline.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
+    points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
     model = None
     if FLAGS.checkpoint:
       from ssd_jax import inference  # pylint: disable=g-import-not-at-top

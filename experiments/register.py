@@ -21,7 +21,7 @@ from absl import flags
 import numpy as np
 
 from ssd_jax import cli, geometry, pretrained
-from ssd_jax.data import groundtruth, io, pipeline as data_pipeline
+from ssd_jax.data import clean, groundtruth, io
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import metrics, pipeline
 
@@ -85,13 +85,13 @@ def main(argv):
     for out_path in (FLAGS.json, FLAGS.plot):
       _check_writable(out_path)
     # float64 until register() has centred the pair: UTM-scale clouds keep their precision.
-    clouds = [data_pipeline.clean_cloud(io.read_cloud(p, FLAGS.format), p, np.float64)
+    clouds = [clean.clean_cloud(io.read_cloud(p, FLAGS.format), p, np.float64)
               for p in (FLAGS.cloud1, FLAGS.cloud2)]
     t_gt = _ground_truth(FLAGS.groundtruth, FLAGS.cloud1, FLAGS.cloud2) if FLAGS.groundtruth else None
     model = None
     if needs_model:
       model = pretrained.load(checkpoint)
-  except (io.CloudFileError, data_pipeline.CloudDataError, FileNotFoundError, ValueError) as e:
+  except (io.CloudFileError, clean.CloudDataError, FileNotFoundError, ValueError) as e:
     raise SystemExit(f'error: {e}') from None
   results = []
   for descriptor in FLAGS.descriptor:

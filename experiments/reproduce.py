@@ -21,7 +21,7 @@ import ml_collections
 
 from ssd_jax import cli, viz
 from ssd_jax.data import benchmarks, io
-from ssd_jax.evaluation import features, fingerprint, runs
+from ssd_jax.evaluation import feature_store, fingerprint, runs
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import pipeline
 
@@ -73,11 +73,11 @@ def keypoint_figure(config, store, missing, cloud_path, out_dir) -> tuple[str, l
   points = store.cloud(cloud_path)
   shown, skipped = {}, []
   for source in config.figures.keypoint_sources:
+    name = feature_store.NAMES.get(source, source)
     if source in missing:
-      skipped.append(f'Fig. 3 {features.NAMES.get(source, source)} keypoints: {missing[source]}')
+      skipped.append(f'Fig. 3 {name} keypoints: {missing[source]}')
       continue
-    shown[f'{features.NAMES.get(source, source)} keypoints'] = points[store.keypoints(cloud_path,
-                                                                                      source)]
+    shown[f'{name} keypoints'] = points[store.keypoints(cloud_path, source)]
   viz.plot_keypoints(points, shown, out_dir / 'fig3_keypoints.png')
   text = (f'Keypoints on {cloud_path} (top view, red dots).\n\n![keypoints](fig3_keypoints.png)\n')
   return text, skipped
@@ -87,9 +87,9 @@ def registration_figures(config, store, missing, name, pairs, out_dir) -> tuple[
   """Figs. 5-6: the first pair of a set registered with each figure row."""
   pair, text, skipped = pairs[0], [], []
   for row in config.figures.registration_rows:
-    if set(features.split_row(row)) & set(missing):
-      skipped.append(f'{name} registration figure {features.row_label(row)}: '
-                     f'{features.missing_reason(row, missing)}')
+    if set(feature_store.split_row(row)) & set(missing):
+      skipped.append(f'{name} registration figure {feature_store.row_label(row)}: '
+                     f'{feature_store.missing_reason(row, missing)}')
       continue
     f1, f2 = store.features(pair.cloud1, row), store.features(pair.cloud2, row)
     reg = pipeline.estimate(f1, f2, seed=config.seed * 1_000_003,
@@ -98,9 +98,9 @@ def registration_figures(config, store, missing, name, pairs, out_dir) -> tuple[
     file = f'registration_{name}_{row.replace("+", "_")}.png'
     viz.plot_registration(store.cloud(pair.cloud1), store.cloud(pair.cloud2), f1.xyz,
                           f2.xyz[reg.matches[:, 1]], reg.inliers, out_dir / file,
-                          title=f'{features.row_label(row)}: {int(reg.inliers.sum())} inliers '
+                          title=f'{feature_store.row_label(row)}: {int(reg.inliers.sum())} inliers '
                                 f'of {len(reg.inliers)} matches')
-    text.append(f'{features.row_label(row)}, pair {pair.idx1}/{pair.idx2} '
+    text.append(f'{feature_store.row_label(row)}, pair {pair.idx1}/{pair.idx2} '
                 f'({pair.sequence}):\n\n![{row}]({file})\n')
   return '\n'.join(text), skipped
 
@@ -200,7 +200,7 @@ def write_report(out_dir, root, config, store, missing, sections, skipped, secon
       'numbers are shown beside for comparison.', '', '## Checkpoints', '']
   for name, path in sorted(config.checkpoints.items()):
     model = store.models.get(name)
-    lines.append(f'- {features.NAMES.get(name, name)}: `{path}` ' +
+    lines.append(f'- {feature_store.NAMES.get(name, name)}: `{path}` ' +
                  (f'(step {model.step})' if model is not None else
                   f'**missing**: {missing.get(name, "not used by any row")}'))
   lines += ['', '## Skipped', '']

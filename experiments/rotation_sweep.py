@@ -14,7 +14,7 @@ from absl import flags
 import numpy as np
 
 from ssd_jax import cli, pretrained, viz
-from ssd_jax.data import io, pipeline
+from ssd_jax.data import clean, io
 from ssd_jax.evaluation import orientation, tables
 from ssd_jax.logging_utils import quiet_libraries
 
@@ -37,7 +37,7 @@ def main(argv):
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
   try:
-    points = pipeline.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
+    points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
     rng = np.random.default_rng(FLAGS.seed)
     centers = points[rng.choice(len(points), min(FLAGS.num_centers, len(points)), replace=False)]
     angles = list(range(0, 360, FLAGS.step_deg))

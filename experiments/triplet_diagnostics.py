@@ -1,6 +1,6 @@
 r"""What a triplet-trained checkpoint learned, and what its triplets offer at all.
 
-    python -m experiments.triplet_diagnostics --config=configs/3dfeatnet_small.py:pretrain \
+    python -m experiments.triplet_diagnostics --config=configs/feat3dnet_small.py:pretrain \
         --workdir=runs/feat3dnet_small_pretrain
 
 On the trainer's fixed probe triplets (see `train.probe_triplets`), prints a Markdown

@@ -32,7 +32,7 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import checkpoint, grouping, network
-from ssd_jax.data.pipeline import check_cloud
+from ssd_jax.data.clean import check_cloud
 
 SEARCHES = ('kdtree', 'dense')
 

@@ -31,7 +31,7 @@ WEIGHTS_DIR = Path(__file__).resolve().parent / 'weights'
 SHIPPED = {
     'ours': 'self-supervised descriptor (configs/cpu_robust.py)',
     'ours_detector': 'self-supervised descriptor and detector (configs/cpu_robust_detector.py)',
-    'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/3dfeatnet_small_varied.py)',
+    'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/feat3dnet_small_varied.py)',
 }
 CONFIG_FILE, WEIGHTS_FILE, CARD_FILE = 'config.json', 'weights.msgpack', 'MODEL_CARD.md'
 

@@ -22,8 +22,8 @@ import numpy as np
 import optax
 from tqdm import auto as tqdm
 
-from ssd_jax import augment, checkpoint, grouping, inference, losses, network, objective
-from ssd_jax.data import pipeline
+from ssd_jax import augment, checkpoint, grouping, inference, network, objective
+from ssd_jax.data import datasets
 
 
 AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
@@ -68,10 +68,10 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'objective must be one of {tuple(objective.OBJECTIVES)}, got {config.objective!r}')
   bad = set(m.augmentations) - set(AUGMENTATIONS)
   require(not bad, f'model.augmentations: unknown {sorted(bad)}; choose from {AUGMENTATIONS}')
-  require(d.triplet_axes in pipeline.TRIPLET_AXES,
-          f'data.triplet_axes must be one of {pipeline.TRIPLET_AXES}, got {d.triplet_axes!r}')
-  require(d.triplet_positives in pipeline.TRIPLET_POSITIVES,
-          f'data.triplet_positives must be one of {pipeline.TRIPLET_POSITIVES}, '
+  require(d.triplet_axes in datasets.TRIPLET_AXES,
+          f'data.triplet_axes must be one of {datasets.TRIPLET_AXES}, got {d.triplet_axes!r}')
+  require(d.triplet_positives in datasets.TRIPLET_POSITIVES,
+          f'data.triplet_positives must be one of {datasets.TRIPLET_POSITIVES}, '
           f'got {d.triplet_positives!r}')
   require(m.margin >= 0, f'model.margin must be >= 0, got {m.margin}')
   require(m.triplet_hinge in objective.TRIPLET_HINGES,
@@ -87,8 +87,8 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
   require(m.num_samples >= 1, f'model.num_samples must be >= 1, got {m.num_samples}')
   require(m.radius > 0, f'model.radius must be > 0 metres, got {m.radius}')
   require(m.alpha > 0, f'model.alpha must be > 0, got {m.alpha}')
-  require(m.loss in losses.ROTATION_LOSSES,
-          f'model.loss must be one of {losses.ROTATION_LOSSES}, got {m.loss!r}')
+  require(m.loss in objective.ROTATION_LOSSES,
+          f'model.loss must be one of {objective.ROTATION_LOSSES}, got {m.loss!r}')
   require(m.center_sampling in grouping.SAMPLERS,
           f'model.center_sampling must be one of {grouping.SAMPLERS}, got {m.center_sampling!r}')
   require(m.rotation_sigma >= 0, f'model.rotation_sigma must be >= 0, got {m.rotation_sigma}')
@@ -319,15 +319,15 @@ def initialize_from(state: TrainState, source: str,
                        opt_state=create_optimizer(config).init(params))
 
 
-def triplet_dataset(config: ml_collections.ConfigDict) -> pipeline.TripletDataset:
+def triplet_dataset(config: ml_collections.ConfigDict) -> datasets.TripletDataset:
   """The triplets of `config.data`."""
-  return pipeline.TripletDataset(config.data.path, axes=config.data.triplet_axes,
+  return datasets.TripletDataset(config.data.path, axes=config.data.triplet_axes,
                                  positives=config.data.triplet_positives,
                                  fmt=config.data.format, crop_radius=config.data.crop_radius,
                                  min_points=config.data.min_points)
 
 
-def probe_triplets(dataset: pipeline.TripletDataset,
+def probe_triplets(dataset: datasets.TripletDataset,
                    config: ml_collections.ConfigDict) -> np.ndarray:
   """The triplet objective's fixed probe: [batch_size * PROBE_BATCHES, 3, N, 3] metres."""
   return dataset.batch(config.seed + 1, 0, config.train.batch_size * PROBE_BATCHES,
@@ -355,10 +355,10 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
   if config.objective == 'triplet':
     dataset = triplet_dataset(config)
   else:
-    dataset = pipeline.CloudDataset.from_source(config.data.path, **data_kwargs)
+    dataset = datasets.CloudDataset.from_source(config.data.path, **data_kwargs)
   eval_points = None
   if config.data.eval_path:
-    eval_set = pipeline.CloudDataset.from_source(config.data.eval_path, **data_kwargs)
+    eval_set = datasets.CloudDataset.from_source(config.data.eval_path, **data_kwargs)
     eval_points = eval_set.batch(config.seed + 1, 0, t_cfg.batch_size, config.data.num_points)
 
   mesh = make_mesh()
@@ -398,7 +398,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
 
   make_batch = lambda step: dataset.batch(config.seed, step, t_cfg.batch_size,
                                           config.data.num_points)
-  batches = pipeline.prefetch(make_batch, range(start, t_cfg.num_steps), config.data.prefetch)
+  batches = datasets.prefetch(make_batch, range(start, t_cfg.num_steps), config.data.prefetch)
   bar = tqdm.tqdm(total=t_cfg.num_steps, initial=start, desc='train', unit='step',
                   dynamic_ncols=True, disable=not config.progress_bar)
   pending: list[tuple[int, dict]] = []

@@ -3,7 +3,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ssd_jax import cf, geometry, losses
+from ssd_jax import cf, geometry, objective
 
 
 def _unit(x):
@@ -54,7 +54,7 @@ def test_cf_gradient_matches_finite_differences():
 
     def loss(fp, fq):
       r, t = cf.cf_solve(args[0], args[1], fp, fq, 0.5)
-      return losses.rotation_loss(r, args[4]) + 0.1 * jnp.sum(t ** 2)
+      return objective.rotation_loss(r, args[4]) + 0.1 * jnp.sum(t ** 2)
 
     grads = jax.grad(loss, argnums=(0, 1))(args[2], args[3])
     eps = 1e-6
@@ -86,7 +86,7 @@ def test_cf_gradients_finite_on_degenerate_geometry(geometry_kind):
 
   def loss(fp, fq):
     r, t = cf.cf_solve(p, q, fp, fq, 1.0)
-    return losses.rotation_loss(r, r_gt) + jnp.sum(t)
+    return objective.rotation_loss(r, r_gt) + jnp.sum(t)
 
   value, grads = jax.value_and_grad(loss, argnums=(0, 1))(feats, feats + 0.01)
   assert np.isfinite(float(value))
@@ -115,11 +115,11 @@ def test_cf_weights_do_not_underflow_for_small_alpha():
 def test_rotation_loss_values_and_gradient_at_identity():
   theta = 0.3
   r = geometry.rotation_z(jnp.float32(theta))
-  assert float(losses.rotation_loss(r, jnp.eye(3))) == pytest.approx(
+  assert float(objective.rotation_loss(r, jnp.eye(3))) == pytest.approx(
       2 * np.sqrt(1 - np.cos(theta)), rel=1e-5)
-  assert float(losses.rotation_loss(r, jnp.eye(3), 'squared_frobenius')) == pytest.approx(
+  assert float(objective.rotation_loss(r, jnp.eye(3), 'squared_frobenius')) == pytest.approx(
       4 * (1 - np.cos(theta)), rel=1e-4)
-  g = jax.grad(lambda a: losses.rotation_loss(geometry.rotation_z(a), jnp.eye(3)))(0.0)
+  g = jax.grad(lambda a: objective.rotation_loss(geometry.rotation_z(a), jnp.eye(3)))(0.0)
   assert np.isfinite(float(g))
   with pytest.raises(ValueError, match='rotation loss must be one of'):
-    losses.rotation_loss(r, r, 'l1')
+    objective.rotation_loss(r, r, 'l1')

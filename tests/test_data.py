@@ -2,7 +2,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from ssd_jax.data import io, pipeline
+from ssd_jax.data import clean, datasets, io
 from tests.conftest import shared_path
 
 
@@ -122,14 +122,14 @@ def test_nan_points_are_dropped_and_all_nan_or_coincident_refused():
   pts = np.random.default_rng(1).normal(size=(50, 3)).astype(np.float32)
   pts[3] = np.nan
   pts[7, 1] = np.inf
-  cleaned = pipeline.clean_cloud(pts, 'c')
+  cleaned = clean.clean_cloud(pts, 'c')
   assert cleaned.shape == (48, 3) and np.isfinite(cleaned).all()
-  with pytest.raises(pipeline.CloudDataError, match='no finite points'):
-    pipeline.clean_cloud(np.full((4, 3), np.nan), 'c')
-  with pytest.raises(pipeline.CloudDataError, match='all 9 points coincide'):
-    pipeline.clean_cloud(np.ones((9, 3)), 'c')
-  with pytest.raises(pipeline.CloudDataError, match=r'shape \[N, 3\]'):
-    pipeline.clean_cloud(np.ones((9, 4)), 'c')
+  with pytest.raises(clean.CloudDataError, match='no finite points'):
+    clean.clean_cloud(np.full((4, 3), np.nan), 'c')
+  with pytest.raises(clean.CloudDataError, match='all 9 points coincide'):
+    clean.clean_cloud(np.ones((9, 3)), 'c')
+  with pytest.raises(clean.CloudDataError, match=r'shape \[N, 3\]'):
+    clean.clean_cloud(np.ones((9, 4)), 'c')
 
 
 def test_oxford_index_and_listing(tmp_path):
@@ -147,18 +147,18 @@ def test_oxford_index_and_listing(tmp_path):
 
 def test_crop_and_subsample_pad_by_repetition():
   pts = np.array([[1.0, 0, 0], [0, 30, 0], [5, 5, 1], [0, 0, 19.9]], np.float32)
-  assert len(pipeline.crop(pts, 20.0)) == 3
+  assert len(datasets.crop(pts, 20.0)) == 3
   rng = np.random.default_rng(0)
   few = np.random.default_rng(2).normal(size=(10, 3)).astype(np.float32)
-  out = pipeline.subsample(rng, few, 64)
+  out = datasets.subsample(rng, few, 64)
   assert out.shape == (64, 3)
   assert {tuple(r) for r in out} == {tuple(r) for r in few}  # every point, then repeats
-  many = pipeline.subsample(rng, np.arange(300, dtype=np.float32).reshape(100, 3), 40)
+  many = datasets.subsample(rng, np.arange(300, dtype=np.float32).reshape(100, 3), 40)
   assert len({tuple(r) for r in many}) == 40
 
 
 def test_dataset_batches_are_a_function_of_seed_and_step():
-  ds = pipeline.CloudDataset.from_source(shared_path('kitti_object_velodyne'))
+  ds = datasets.CloudDataset.from_source(shared_path('kitti_object_velodyne'))
   assert len(ds) == 6
   a = ds.batch(0, 5, 3, 256)
   np.testing.assert_array_equal(a, ds.batch(0, 5, 3, 256))
@@ -169,10 +169,10 @@ def test_dataset_batches_are_a_function_of_seed_and_step():
 
 def test_dataset_refuses_clouds_far_from_their_sensor(tmp_path):
   (np.random.default_rng(0).normal(size=(100, 3)) + 500).astype(np.float32).tofile(tmp_path / 'a.bin')
-  ds = pipeline.CloudDataset([tmp_path / 'a.bin'], fmt='xyz', min_points=10)
-  with pytest.raises(pipeline.CloudDataError, match='0 points within 20.0 m'):
+  ds = datasets.CloudDataset([tmp_path / 'a.bin'], fmt='xyz', min_points=10)
+  with pytest.raises(clean.CloudDataError, match='0 points within 20.0 m'):
     ds.cloud(0)
 
 
 def test_prefetch_preserves_order():
-  assert list(pipeline.prefetch(lambda s: s * s, range(3, 12), depth=3)) == [s * s for s in range(3, 12)]
+  assert list(datasets.prefetch(lambda s: s * s, range(3, 12), depth=3)) == [s * s for s in range(3, 12)]

@@ -13,7 +13,7 @@ import pytest
 
 from ssd_jax import geometry, inference, train
 from ssd_jax.data import benchmarks, clusters, io
-from ssd_jax.evaluation import (descriptor_matching, features, learning_curve, precision,
+from ssd_jax.evaluation import (descriptor_matching, feature_store, learning_curve, precision,
                                 registration, repeatability)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -176,7 +176,7 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
 
   # The table's numbers are recomputed: redo ISS + FPFH on the same two pairs here.
   pairs = benchmarks.read_registration_set(synthetic_root / 'test_oxford')[:2]
-  store = features.FeatureStore({}, seed=0, fpfh_max_nn=50)
+  store = feature_store.FeatureStore({}, seed=0, fpfh_max_nn=50)
   res = registration.register_pairs(pairs, ['iss+fpfh'], store, progress=False)['iss+fpfh']
   table = {r[0]: r for r in _csv(out / 'table_oxford.csv')}
   row = table['ISS kpt + FPFH desc']
@@ -260,7 +260,7 @@ def test_learning_curve_rows_resume_and_cli(synthetic_root, tiny_checkpoint, tmp
       ('', '', 'iss+fpfh'), ('tiny', '2', 'iss+ours'), ('tiny', '4', 'iss+ours')]
   assert loaded == checkpoints
   # The FPFH row is the registration table's row on the same pairs.
-  store = features.FeatureStore({}, seed=0)
+  store = feature_store.FeatureStore({}, seed=0)
   res = registration.register_pairs(pairs, ['iss+fpfh'], store, progress=False)['iss+fpfh']
   assert float(records[0]['success']) == pytest.approx(100 * np.mean([r['success'] for r in res]))
   assert float(records[0]['trials']) == pytest.approx(np.mean([r['trials'] for r in res]))

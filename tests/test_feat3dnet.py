@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ssd_jax import geometry, inference, objective, train
-from ssd_jax.data import pipeline
+from ssd_jax.data import clean, datasets
 from ssd_jax.evaluation import orientation, repeatability, triplets
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -60,7 +60,7 @@ def test_attention_weighted_triplet_by_hand():
 
 
 def test_triplet_dataset_draws_valid_triplets(synthetic_root):
-  data = pipeline.TripletDataset(synthetic_root / 'train')
+  data = datasets.TripletDataset(synthetic_root / 'train')
   from ssd_jax.data import io  # pylint: disable=g-import-not-at-top
   entries = io.read_oxford_index(synthetic_root / 'train' / 'train.txt')
   for a in data.anchors:
@@ -71,15 +71,15 @@ def test_triplet_dataset_draws_valid_triplets(synthetic_root):
   assert b1.shape == (2, 3, 256, 3)
   np.testing.assert_array_equal(b1, data.batch(0, 3, 2, 256))
   assert not np.array_equal(b1, data.batch(0, 4, 2, 256))
-  with pytest.raises(pipeline.CloudDataError, match='needs a 3DFeat-Net train.txt'):
-    pipeline.TripletDataset(synthetic_root / 'test_kitti' / '00')
+  with pytest.raises(clean.CloudDataError, match='needs a 3DFeat-Net train.txt'):
+    datasets.TripletDataset(synthetic_root / 'test_kitti' / '00')
 
 
 def test_self_positives_control(synthetic_root):
   """positives='self': each cloud's positive is the same scan, subsampled afresh;
   the negatives stay those of the index."""
-  indexed = pipeline.TripletDataset(synthetic_root / 'train')
-  control = pipeline.TripletDataset(synthetic_root / 'train', positives='self')
+  indexed = datasets.TripletDataset(synthetic_root / 'train')
+  control = datasets.TripletDataset(synthetic_root / 'train', positives='self')
   assert [p.tolist() for p in control.positives] == [[i] for i in range(len(control.positives))]
   for a in indexed.anchors:
     np.testing.assert_array_equal(control.negatives[a], indexed.negatives[a])
@@ -89,8 +89,8 @@ def test_self_positives_control(synthetic_root):
   assert all(tuple(p) in scan for p in positive.round(4))   # drawn from the anchor's scan
   assert not np.array_equal(np.sort(anchor, 0), np.sort(positive, 0))   # a different draw
   assert not any(tuple(p) in scan for p in negative.round(4)[:20])
-  with pytest.raises(pipeline.CloudDataError, match='positives must be one of'):
-    pipeline.TripletDataset(synthetic_root / 'train', positives='nearest')
+  with pytest.raises(clean.CloudDataError, match='positives must be one of'):
+    datasets.TripletDataset(synthetic_root / 'train', positives='nearest')
 
 
 def test_triplet_clouds_share_their_scene_axes(synthetic_root):
@@ -98,8 +98,8 @@ def test_triplet_clouds_share_their_scene_axes(synthetic_root):
   only; as stored (sensor frames) they also differ by the heading change."""
   from scipy import spatial  # pylint: disable=g-import-not-at-top
   from ssd_jax.data import kitti  # pylint: disable=g-import-not-at-top
-  scene = pipeline.TripletDataset(synthetic_root / 'train', crop_radius=0)
-  stored = pipeline.TripletDataset(synthetic_root / 'train', axes='stored', crop_radius=0)
+  scene = datasets.TripletDataset(synthetic_root / 'train', crop_radius=0)
+  stored = datasets.TripletDataset(synthetic_root / 'train', axes='stored', crop_radius=0)
   position = lambda f: kitti.read_poses(f.parent / 'poses.txt')[int(f.stem), :3, 3]
   gaps = {}
   for name, data in (('scene', scene), ('stored', stored)):
@@ -110,8 +110,8 @@ def test_triplet_clouds_share_their_scene_axes(synthetic_root):
     cloud_p = data.clouds.cloud(p) + position(files[p])
     gaps[name] = np.median(spatial.cKDTree(cloud_p).query(cloud_a)[0])
   assert gaps['scene'] < 0.25 < gaps['stored'], gaps    # voxel 0.2 m vs. metres apart
-  with pytest.raises(pipeline.CloudDataError, match='axes must be one of'):
-    pipeline.TripletDataset(synthetic_root / 'train', axes='world')
+  with pytest.raises(clean.CloudDataError, match='axes must be one of'):
+    datasets.TripletDataset(synthetic_root / 'train', axes='world')
 
 
 def test_scene_axes_need_frame_numbered_files(synthetic_root, tmp_path):
@@ -119,9 +119,9 @@ def test_scene_axes_need_frame_numbered_files(synthetic_root, tmp_path):
   folder.mkdir()
   (folder / 'poses.txt').write_text((synthetic_root / 'train' / '00' / 'poses.txt').read_text())
   (folder / 'scan_a.bin').write_bytes((synthetic_root / 'train' / '00' / '000000.bin').read_bytes())
-  with pytest.raises(pipeline.CloudDataError, match='named by its frame number'):
-    pipeline.scene_rotations([folder / 'scan_a.bin'])
-  assert pipeline.scene_rotations([synthetic_root / 'clusters' / 'does_not_matter.bin']) == [None]
+  with pytest.raises(clean.CloudDataError, match='named by its frame number'):
+    datasets.scene_rotations([folder / 'scan_a.bin'])
+  assert datasets.scene_rotations([synthetic_root / 'clusters' / 'does_not_matter.bin']) == [None]
 
 
 def _triplet_config(tiny_config, root, stage):
@@ -144,7 +144,7 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
   probes = {r['step']: r['probe_loss'] for r in records if 'probe_loss' in r}
   assert sorted(probes) == [0, 2]
   # Step 0's probe is the untrained state's triplet loss on the fixed probe triplets.
-  data = pipeline.TripletDataset(pre.data.path, min_points=pre.data.min_points)
+  data = datasets.TripletDataset(pre.data.path, min_points=pre.data.min_points)
   probe = data.batch(pre.seed + 1, 0, pre.train.batch_size * train.PROBE_BATCHES,
                      pre.data.num_points)
   untrained = train.create_train_state(pre, jax.random.key(pre.seed))
@@ -237,8 +237,8 @@ def test_keypoint_repeatability_by_hand():
 def test_fpfh_probe_finds_an_identical_positive(synthetic_root):
   """FPFH on (A, A, B): every anchor cluster's best positive match is itself (accuracy 1);
   on (A, B, A) the negative is the copy (accuracy 0)."""
-  data = pipeline.TripletDataset(synthetic_root / 'train')
-  a, b = (pipeline.subsample(np.random.default_rng(i), data.clouds.cloud(i), 512)
+  data = datasets.TripletDataset(synthetic_root / 'train')
+  a, b = (datasets.subsample(np.random.default_rng(i), data.clouds.cloud(i), 512)
           for i in (0, len(data.clouds) - 1))
   same_positive = triplets.fpfh_probe(np.stack([np.stack([a, a, b])]), 32, fpfh_max_nn=50)
   same_negative = triplets.fpfh_probe(np.stack([np.stack([a, b, a])]), 32, fpfh_max_nn=50)
@@ -263,7 +263,7 @@ def test_turn_clouds_turns_each_cloud_about_z_within_range():
 
 def test_triplet_diagnostics_cli_names_a_missing_checkpoint(synthetic_root, tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.triplet_diagnostics',
-                        '--config=configs/3dfeatnet_small.py:pretrain',
+                        '--config=configs/feat3dnet_small.py:pretrain',
                         f'--config.data.path={synthetic_root / "train"}',
                         f'--workdir={tmp_path / "none"}'],
                        cwd=ROOT, capture_output=True, text=True, timeout=300)

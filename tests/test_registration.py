@@ -159,7 +159,7 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
 
 
 def test_pipeline_refuses_bad_clouds_with_one_line():
-  from ssd_jax.data import pipeline as data_pipeline  # pylint: disable=g-import-not-at-top
+  from ssd_jax.data import clean  # pylint: disable=g-import-not-at-top
   from ssd_jax.registration import pipeline  # pylint: disable=g-import-not-at-top
   pts = np.random.default_rng(0).normal(size=(500, 3)) * 5
   with_nan = pts.copy()
@@ -174,7 +174,7 @@ def test_pipeline_refuses_bad_clouds_with_one_line():
     with pytest.raises(ValueError, match='keypoint_idx must be'):
       pipeline.compute_descriptors(pts, idx, 'fpfh')
   # Coordinates that even their own file type cannot resolve: said so, not "degenerate".
-  with pytest.raises(data_pipeline.CloudDataError, match='float32 resolves only 64 m; store it'):
-    data_pipeline.clean_cloud((pts + 1e9).astype(np.float32), 'far')
-  far = data_pipeline.clean_cloud(pts + 1e9, 'far', np.float64)
+  with pytest.raises(clean.CloudDataError, match='float32 resolves only 64 m; store it'):
+    clean.clean_cloud((pts + 1e9).astype(np.float32), 'far')
+  far = clean.clean_cloud(pts + 1e9, 'far', np.float64)
   assert far.dtype == np.float64 and np.ptp(far - 1e9) > 10

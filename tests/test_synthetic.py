@@ -12,7 +12,7 @@ from scipy import spatial
 
 from configs import synthetic
 from ssd_jax import geometry
-from ssd_jax.data import groundtruth, io, pipeline
+from ssd_jax.data import datasets, groundtruth, io
 from ssd_jax.synthetic import dataset, lidar, realism, scene as scene_lib
 
 
@@ -190,7 +190,7 @@ def test_training_folder_reads_as_oxford_index(tiny_set):
     assert k not in e.positives and set(e.positives) <= set(e.non_negatives)
     for j in e.positives:
       assert np.linalg.norm(poses[k, :, 3] - poses[j, :, 3]) < 10.0
-  ds = pipeline.CloudDataset.from_source(tiny_set / 'train', min_points=64)
+  ds = datasets.CloudDataset.from_source(tiny_set / 'train', min_points=64)
   assert ds.batch(0, 0, 2, 512).shape == (2, 512, 3)
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from configs import cpu_robust
 from ssd_jax import checkpoint, inference, train
-from ssd_jax.data import pipeline
+from ssd_jax.data import datasets
 from tests.conftest import shared_path
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -126,17 +126,17 @@ def test_resume_after_a_crash_is_bitwise_identical(tiny_config, tmp_path, monkey
   config.train.checkpoint_every = 4
   straight = train.train_and_evaluate(config, str(tmp_path / 'straight'))
 
-  original = pipeline.CloudDataset.batch
+  original = datasets.CloudDataset.batch
 
   def crash_at_step_6(self, seed, step, *args):
     if step == 6:
       raise KeyboardInterrupt('simulated kill')
     return original(self, seed, step, *args)
 
-  monkeypatch.setattr(pipeline.CloudDataset, 'batch', crash_at_step_6)
+  monkeypatch.setattr(datasets.CloudDataset, 'batch', crash_at_step_6)
   with pytest.raises(KeyboardInterrupt):
     train.train_and_evaluate(config, str(tmp_path / 'resumed'))
-  monkeypatch.setattr(pipeline.CloudDataset, 'batch', original)
+  monkeypatch.setattr(datasets.CloudDataset, 'batch', original)
   assert sorted(os.listdir(tmp_path / 'resumed' / 'checkpoints')) == ['4']
   resumed = train.train_and_evaluate(config, str(tmp_path / 'resumed'))
 
@@ -152,7 +152,7 @@ def test_divergence_stops_with_a_clear_message(tiny_config, tmp_path, monkeypatc
   config = tiny_config
   config.data.path = str(shared_path('kitti_object_velodyne'))
   config.train.num_steps = 6
-  original = pipeline.CloudDataset.batch
+  original = datasets.CloudDataset.batch
 
   def nan_at_step_3(self, seed, step, *args):
     out = original(self, seed, step, *args)
@@ -160,7 +160,7 @@ def test_divergence_stops_with_a_clear_message(tiny_config, tmp_path, monkeypatc
       out[0, 0] = np.nan
     return out
 
-  monkeypatch.setattr(pipeline.CloudDataset, 'batch', nan_at_step_3)
+  monkeypatch.setattr(datasets.CloudDataset, 'batch', nan_at_step_3)
   with pytest.raises(train.TrainingDiverged, match=r'step 4 .*Last good checkpoint: step 2'):
     train.train_and_evaluate(config, str(tmp_path / 'run'))
   assert sorted(os.listdir(tmp_path / 'run' / 'checkpoints')) == ['2']

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ssd_jax.data import groundtruth, io, pipeline
+from ssd_jax.data import clean, groundtruth, io
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,7 +111,7 @@ def make_rescan_set(sources: list, out: str | os.PathLike, seed: int = 0,
   rows, gts, n = [], [], 0
   width = 360.0 / pairs_per_cloud
   for s, source in enumerate(sources):
-    points = pipeline.clean_cloud(io.read_cloud(source), str(source))
+    points = clean.clean_cloud(io.read_cloud(source), str(source))
     for j in range(pairs_per_cloud):
       rng = np.random.default_rng((seed, s, j))
       yaw = -180.0 + width * (j + rng.uniform())

@@ -17,7 +17,7 @@ import numpy as np
 from tqdm import auto as tqdm
 
 from ssd_jax import inference
-from ssd_jax.data import clusters as clusters_lib, io, pipeline as data_pipeline
+from ssd_jax.data import clean, clusters as clusters_lib, io
 from ssd_jax.registration import features as features_lib, keypoints
 
 RECALL = 0.95
@@ -54,7 +54,7 @@ def roc_curve(distances: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np
 
 
 def read_cluster(path) -> np.ndarray:
-  return data_pipeline.clean_cloud(io.read_cloud(path), str(path))
+  return clean.clean_cloud(io.read_cloud(path), str(path))
 
 
 def center_keypoint_distance(cluster: np.ndarray) -> float:

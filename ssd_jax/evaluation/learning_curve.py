@@ -16,7 +16,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ssd_jax.evaluation import features, precision, registration
+from ssd_jax.evaluation import feature_store, precision, registration
 from ssd_jax.registration import features as features_lib, metrics
 
 YAW_BINS = ((0, 45), (45, 90), (90, 135), (135, 180))   # |relative yaw|, degrees
@@ -52,7 +52,7 @@ def summarize_row(pairs: Sequence, results: Sequence[dict], precision_curve: np.
   return out
 
 
-def evaluate_row(pairs: Sequence, row: str, store: features.FeatureStore, seed: int = 0,
+def evaluate_row(pairs: Sequence, row: str, store: feature_store.FeatureStore, seed: int = 0,
                  progress: bool = False, desc: str = '') -> dict[str, float]:
   """Registration and precision of one `keypoints+descriptor` row on one set."""
   results = registration.register_pairs(pairs, [row], store, seed=seed, progress=progress,
@@ -89,7 +89,7 @@ def run(sets: Mapping[str, Sequence], checkpoints: Sequence[tuple[str, int]],
   inference.Model. -> all records of the CSV.
   """
   done = {(r['run'], r['step'], r['set'], r['row']) for r in read_csv(csv_path)}
-  store = features.FeatureStore({}, seed, fpfh_max_nn)
+  store = feature_store.FeatureStore({}, seed, fpfh_max_nn)
   for name, pairs in sets.items():
     for row in baseline_rows:
       if ('', '', name, row) not in done:

@@ -16,7 +16,7 @@ from scipy import spatial
 from tqdm import auto as tqdm
 
 from ssd_jax import geometry
-from ssd_jax.evaluation import features
+from ssd_jax.evaluation import feature_store
 from ssd_jax.registration import matching
 
 OVERLAP_RADIUS = 0.75                                   # metres
@@ -52,7 +52,7 @@ def precision_curve(errors: np.ndarray, thresholds: np.ndarray = THRESHOLDS) -> 
   return np.mean(errors[:, None] < np.asarray(thresholds)[None, :], axis=0)
 
 
-def pair_errors(pair, row: str, store: features.FeatureStore,
+def pair_errors(pair, row: str, store: feature_store.FeatureStore,
                 overlap_radius: float = OVERLAP_RADIUS) -> tuple[np.ndarray, int]:
   """Errors [M] of the overlapping keypoints of one pair and row, and K1 (all keypoints)."""
   f1, f2 = store.features(pair.cloud1, row), store.features(pair.cloud2, row)
@@ -63,7 +63,7 @@ def pair_errors(pair, row: str, store: features.FeatureStore,
   return errors[keep], len(f1.xyz)
 
 
-def evaluate_precision(pairs: Sequence, rows: Sequence[str], store: features.FeatureStore,
+def evaluate_precision(pairs: Sequence, rows: Sequence[str], store: feature_store.FeatureStore,
                        overlap_radius: float = OVERLAP_RADIUS, progress: bool = True,
                        desc: str = 'precision') -> dict[str, dict]:
   """-> {row: {'errors': [M] pooled over pairs, 'keypoints': all cloud-1 keypoints,

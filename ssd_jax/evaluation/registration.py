@@ -8,11 +8,11 @@ from typing import Mapping, Sequence, TextIO
 
 from tqdm import auto as tqdm
 
-from ssd_jax.evaluation import features, paper, tables
+from ssd_jax.evaluation import feature_store, paper, tables
 from ssd_jax.registration import metrics, pipeline
 
 
-def register_pairs(pairs: Sequence, rows: Sequence[str], store: features.FeatureStore, *,
+def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.FeatureStore, *,
                    seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
                    max_trials: int = 10_000, log: TextIO | None = None,
                    progress: bool = True, desc: str = 'registration') -> dict[str, list[dict]]:
@@ -61,10 +61,10 @@ def registration_table(results: Mapping[str, list[dict]], rows: Sequence[str],
     ref = ' / '.join(str(v) for v in ref) if ref else '-'
     if row in results:
       s = metrics.summarize(results[row])
-      table.append([features.row_label(row), s['pairs'], tables.fmt(s['rte'], 3),
+      table.append([feature_store.row_label(row), s['pairs'], tables.fmt(s['rte'], 3),
                     tables.fmt(s['rre'], 3), tables.fmt(s['rre_geodesic'], 3),
                     tables.fmt(100 * s['success_rate']), f'{s["trials"]:.0f}', ref])
     else:
-      table.append([features.row_label(row), 'missing', '-', '-', '-', '-', '-',
-                    f'{ref} ({features.missing_reason(row, missing)})'])
+      table.append([feature_store.row_label(row), 'missing', '-', '-', '-', '-', '-',
+                    f'{ref} ({feature_store.missing_reason(row, missing)})'])
   return header, table

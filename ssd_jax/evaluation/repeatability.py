@@ -13,7 +13,7 @@ from scipy import spatial
 from tqdm import auto as tqdm
 
 from ssd_jax import geometry
-from ssd_jax.evaluation import features
+from ssd_jax.evaluation import feature_store
 
 RADIUS = 0.5   # metres
 
@@ -34,7 +34,7 @@ def keypoint_repeatability(keypoints1: np.ndarray, keypoints2: np.ndarray,
 
 
 def evaluate_repeatability(pairs: Sequence, sources: Sequence[str],
-                           store: features.FeatureStore, radius: float = RADIUS,
+                           store: feature_store.FeatureStore, radius: float = RADIUS,
                            progress: bool = True) -> dict[str, dict]:
   """-> {source: {'repeatability': mean over pairs, 'keypoints': mean count per cloud}}."""
   rep = {s: [] for s in sources}

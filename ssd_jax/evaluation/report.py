@@ -10,7 +10,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ssd_jax import viz
-from ssd_jax.evaluation import (descriptor_matching, features, paper, precision, registration,
+from ssd_jax.evaluation import (descriptor_matching, feature_store, paper, precision, registration,
                                 repeatability, tables)
 
 
@@ -45,17 +45,17 @@ def precision_outputs(results: Mapping[str, dict], rows: Sequence[str],
             f'paper at {read_at:g} m (%)']
   table = []
   for row in rows:
-    ref = paper.PRECISION_AT_1M.get(features.split_row(row)[1]) if read_at == 1.0 else None
+    ref = paper.PRECISION_AT_1M.get(feature_store.split_row(row)[1]) if read_at == 1.0 else None
     ref = f'~{ref:g}' if ref is not None and not row.startswith('random') else '-'
     if row in results:
       r = results[row]
-      table.append([features.row_label(row), f'{len(r["errors"])} / {r["keypoints"]}',
+      table.append([feature_store.row_label(row), f'{len(r["errors"])} / {r["keypoints"]}',
                     tables.fmt(100 * precision.value_at(r['curve'], read_at)), ref])
     else:
-      table.append([features.row_label(row), 'missing', '-',
-                    f'{ref} ({features.missing_reason(row, missing)})'])
+      table.append([feature_store.row_label(row), 'missing', '-',
+                    f'{ref} ({feature_store.missing_reason(row, missing)})'])
   if ran:
-    viz.plot_precision(x, {features.row_label(r): results[r]['curve'] for r in ran},
+    viz.plot_precision(x, {feature_store.row_label(r): results[r]['curve'] for r in ran},
                        os.path.join(workdir, f'{name}.png'), marker=read_at,
                        title=f'Precision ({description})')
   text = (f'Precision on {description}: share of cloud-1 keypoints (within '
@@ -81,7 +81,7 @@ def descriptor_matching_outputs(distances: Mapping[str, np.ndarray], labels: np.
            ['{} ({}, {})'.format(sum(paper.ISS_FILTERED[r][0]), *paper.ISS_FILTERED[r][0])
             if r in paper.ISS_FILTERED else '-' for r in r_th]]
   for n in list(distances) + [m for m in missing if m not in distances]:
-    label = features.NAMES.get(n, n)
+    label = feature_store.NAMES.get(n, n)
     if n in distances:
       table.append([label] + [tables.fmt(100 * f[n]) for _, _, f in res])
     else:
@@ -92,11 +92,12 @@ def descriptor_matching_outputs(distances: Mapping[str, np.ndarray], labels: np.
       table.append([f'{label} (paper)'] + [tables.fmt(v) if v is not None else '-' for v in ref])
   tables.write_csv(os.path.join(workdir, f'{name}.csv'), header, table)
   if distances:
-    viz.plot_roc({features.NAMES.get(n, n): descriptor_matching.roc_curve(d, labels)
+    viz.plot_roc({feature_store.NAMES.get(n, n): descriptor_matching.roc_curve(d, labels)
                   for n, d in distances.items()},
                  os.path.join(workdir, f'{name}_roc.png'), recall=recall,
                  title=f'Descriptor matching ({description})')
-  notes = ''.join(f'- {features.NAMES.get(n, n)} missing: {why}\n' for n, why in missing.items())
+  notes = ''.join(f'- {feature_store.NAMES.get(n, n)} missing: {why}\n'
+                  for n, why in missing.items())
   text = (f'Descriptor matching on {description}: FPR (%) at {100 * recall:g} % recall, lower '
           'is better; ISS-filtered columns keep pairs whose two clusters both have an ISS '
           'keypoint within r_th of the center. Paper FPFH and 3DFeat-Net numbers on all pairs '
@@ -116,10 +117,10 @@ def repeatability_outputs(results: Mapping[str, dict], sources: Sequence[str],
   table = []
   for s in sources:
     if s in results:
-      table.append([features.NAMES.get(s, s), tables.fmt(100 * results[s]['repeatability']),
+      table.append([feature_store.NAMES.get(s, s), tables.fmt(100 * results[s]['repeatability']),
                     tables.fmt(results[s]['keypoints'], 0)])
     else:
-      table.append([features.NAMES.get(s, s), 'missing', missing.get(s, '-')])
+      table.append([feature_store.NAMES.get(s, s), 'missing', missing.get(s, '-')])
   text = (f'Keypoint repeatability on {description}: share of cloud-1 keypoints with a cloud-2 '
           f'keypoint within {radius:g} m after the ground-truth alignment, mean over pairs.\n\n'
           + tables.markdown_table(header, table))

@@ -10,7 +10,7 @@ from typing import Sequence
 import ml_collections
 
 from ssd_jax.data import benchmarks, clusters
-from ssd_jax.evaluation import (descriptor_matching, features, precision, registration,
+from ssd_jax.evaluation import (descriptor_matching, feature_store, precision, registration,
                                 repeatability, report)
 
 
@@ -22,8 +22,8 @@ def load_pairs(config: ml_collections.ConfigDict) -> list:
 
 def open_store(config: ml_collections.ConfigDict, rows: Sequence[str]):
   """Load the checkpoints the rows need -> (FeatureStore, {name: why missing})."""
-  models, missing = features.load_models(config.checkpoints, features.model_names(rows))
-  return features.FeatureStore(models, config.seed, config.fpfh_max_nn), missing
+  models, missing = feature_store.load_models(config.checkpoints, feature_store.model_names(rows))
+  return feature_store.FeatureStore(models, config.seed, config.fpfh_max_nn), missing
 
 
 def run_registration(config, pairs, store, missing, workdir: str, paper_set: str,
@@ -33,7 +33,7 @@ def run_registration(config, pairs, store, missing, workdir: str, paper_set: str
   os.makedirs(workdir, exist_ok=True)
   with open(os.path.join(workdir, f'{name}_pairs.jsonl'), 'w') as log:
     results = registration.register_pairs(
-        pairs, features.runnable_rows(rows, missing), store, seed=config.seed,
+        pairs, feature_store.runnable_rows(rows, missing), store, seed=config.seed,
         inlier_threshold=config.inlier_threshold, confidence=config.confidence,
         max_trials=config.max_trials, log=log, desc=name)
   return report.registration_outputs(results, rows, missing, workdir, paper_set, description, name)
@@ -44,7 +44,7 @@ def run_precision(config, pairs, store, missing, workdir: str, description: str,
   """Fig. 4 on `pairs`: WORKDIR/{name}.csv, .md and .png."""
   rows = list(config.rows)
   os.makedirs(workdir, exist_ok=True)
-  results = precision.evaluate_precision(pairs, features.runnable_rows(rows, missing), store,
+  results = precision.evaluate_precision(pairs, feature_store.runnable_rows(rows, missing), store,
                                          overlap_radius=config.overlap_radius, desc=name)
   return report.precision_outputs(results, rows, missing, workdir, config.read_at, description,
                                   name)
@@ -57,7 +57,7 @@ def run_descriptor_matching(config, folder, workdir: str, description: str | Non
   if config.max_pairs:
     pairs = pairs[:config.max_pairs]
   names = list(config.descriptors)
-  models, missing = features.load_models(config.checkpoints,
+  models, missing = feature_store.load_models(config.checkpoints,
                                          [n for n in names if n != 'fpfh'])
   descriptors = {n: (None if n == 'fpfh' else models[n]) for n in names if n not in missing}
   distances, iss_distance = descriptor_matching.describe_pairs(

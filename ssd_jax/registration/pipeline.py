@@ -14,7 +14,7 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import inference
-from ssd_jax.data.pipeline import check_cloud
+from ssd_jax.data.clean import check_cloud
 from ssd_jax.registration import features, keypoints as keypoints_lib, matching, ransac
 
 KEYPOINTS = ('iss', 'learned', 'random')

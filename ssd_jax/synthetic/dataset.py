@@ -32,7 +32,7 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import geometry
-from ssd_jax.data import groundtruth, io, kitti, pipeline, preprocess
+from ssd_jax.data import datasets, groundtruth, io, kitti, preprocess
 from ssd_jax.registration import keypoints
 from ssd_jax.synthetic import lidar, scene as scene_lib, trajectory
 
@@ -215,7 +215,7 @@ def _write_test_oxford(config, out: Path, tick) -> int:
         logging.warning('test_oxford model %d: only %d points within %.0f m, fewer than %d; '
                         'some are repeated', idx0 + k, len(points), cfg.crop_radius,
                         cfg.num_points)
-      keep = np.sort(pipeline.subsample_indices(rng, len(points), cfg.num_points))
+      keep = np.sort(datasets.subsample_indices(rng, len(points), cfg.num_points))
       rot = geometry.rotation_z(rng.uniform(-np.pi, np.pi))
       io.write_bin(folder / f'{idx0 + k}.bin', points[keep] @ rot.T, normals[keep] @ rot.T)
       frames.append(drive.poses[k] @ geometry.make_transform(rot.T, np.zeros(3)))

@@ -18,7 +18,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ssd_jax import pretrained
-from ssd_jax.data import io, pipeline as data_pipeline
+from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
 from ssd_jax.registration import features as features_lib, pipeline
 
@@ -96,7 +96,7 @@ class FeatureStore:
     """xyz [N, 3] metres, NaN rows dropped."""
     key = str(path)
     if key not in self._clouds:
-      self._clouds[key] = data_pipeline.clean_cloud(io.read_cloud(path), key)
+      self._clouds[key] = clean.clean_cloud(io.read_cloud(path), key)
     return self._clouds[key]
 
   def keypoints(self, path: str | os.PathLike, source: str) -> np.ndarray:

@@ -3,14 +3,14 @@
 Commands (after `experiments.make_synthetic --config=configs/synthetic_small_varied.py
 --out=data_cache/synthetic_small_varied`):
 
-    python -m experiments.train --config=configs/3dfeatnet_small_varied.py:pretrain \
+    python -m experiments.train --config=configs/feat3dnet_small_varied.py:pretrain \
         --workdir=runs/feat3dnet_small_varied_pretrain
-    python -m experiments.train --config=configs/3dfeatnet_small_varied.py \
+    python -m experiments.train --config=configs/feat3dnet_small_varied.py \
         --workdir=runs/feat3dnet_small_varied
 
-configs/3dfeatnet_small.py with two changes: the training split of
+configs/feat3dnet_small.py with two changes: the training split of
 configs/synthetic_small_varied.py, and a 4 m cluster radius on both stages. Under
-Rotate1D, stage 2 of configs/3dfeatnet_small.py stays at chance; each change alone moves
+Rotate1D, stage 2 of configs/feat3dnet_small.py stays at chance; each change alone moves
 it little, and together they lower its loss (README, "3DFeat-Net baseline"). Held-out
 evaluation stays on `synthetic_small`'s test models.
 
@@ -23,9 +23,7 @@ Rotate1D on), step 0 -> probes at 500, 1,000, ... 3,000: seed 0 0.173 (0.56) -> 
 steps: seed 0 0.155 -> 0.141, seed 1 0.167 -> 0.149 (`--config.seed=1`).
 """
 
-import importlib
-
-small = importlib.import_module('configs.3dfeatnet_small')
+from configs import feat3dnet_small as small
 
 
 def get_config(stage: str = 'full'):

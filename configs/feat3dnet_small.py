@@ -2,12 +2,12 @@
 
 Commands (after the README's main job made data_cache/synthetic_small):
 
-    python -m experiments.train --config=configs/3dfeatnet_small.py:pretrain \
+    python -m experiments.train --config=configs/feat3dnet_small.py:pretrain \
         --workdir=runs/feat3dnet_small_pretrain
-    python -m experiments.train --config=configs/3dfeatnet_small.py \
+    python -m experiments.train --config=configs/feat3dnet_small.py \
         --workdir=runs/feat3dnet_small
 
-The reference recipe (configs/3dfeatnet_paper.py) shrunk as configs/cpu_small.py
+The reference recipe (configs/feat3dnet_paper.py) shrunk as configs/cpu_small.py
 shrinks the paper's: 2 triplets x 2,048 points, 256 clusters of 32 points, and a
 learning rate of 1e-3 instead of 1e-5 so that a few hundred steps learn something.
 Stage 1: 600 steps (~2 min); stage 2: 3,000 steps (~15 min).
@@ -24,16 +24,13 @@ from 0.140 to 0.060 in 600 steps; with Rotate1D but each cloud its own positive
 (`--config.data.triplet_positives=self`) from 0.186 to 0.138 in 3,000 steps. With a
 hinge per cluster (`--config.model.triplet_hinge=cluster`, this codebase's form before
 2026-11-24) stage 2 resumed to 18,000 steps still swung at chance, 0.192 to 0.204.
-README "3DFeat-Net baseline" has the diagnosis. configs/3dfeatnet_small_varied.py is
+docs/feat3dnet_baseline.md has the diagnosis. configs/feat3dnet_small_varied.py is
 this recipe on training streets with turned street furniture and 4 m clusters, where
 stage 2 does lower its loss; the evaluations' default baseline checkpoint is that run.
 """
 
-import importlib
-
 from configs import cpu_small
-
-paper_baseline = importlib.import_module('configs.3dfeatnet_paper')
+from configs import feat3dnet_paper as paper_baseline
 
 
 def get_config(stage: str = 'full'):

@@ -1,4 +1,5 @@
-"""Host-side training data: clean, crop, subsample, batch and prefetch (numpy, seeded).
+"""Host-side training data: datasets of clouds and triplets that crop, subsample,
+batch and prefetch (numpy, seeded).
 
 Every batch is a pure function of (seed, step): the data-stream position is the
 step itself, so a resumed run sees exactly the batches an uninterrupted run
@@ -17,82 +18,8 @@ from typing import Iterator, Sequence
 from absl import logging
 import numpy as np
 
-from ssd_jax.data import io
+from ssd_jax.data import clean, io
 from ssd_jax.data import kitti
-
-
-class CloudDataError(ValueError):
-  """A cloud cannot be used for training (no points left, degenerate, ...)."""
-
-
-# Metres: the coarsest spacing a coordinate's floating-point type may have. A 0.2 m
-# voxel grid and 1 m RANSAC inliers need the points far finer than this.
-MAX_RESOLUTION = 0.01
-
-
-def _resolution_problem(points: np.ndarray, dtype) -> str | None:
-  """Why finite points [N, 3] cannot be held in `dtype` to MAX_RESOLUTION, or None."""
-  if not len(points):
-    return None
-  reach = float(np.max(np.abs(points)))
-  step = float(np.spacing(np.dtype(dtype).type(reach)))
-  if step > MAX_RESOLUTION:
-    return (f'coordinates reach {reach:.3g} m, where {np.dtype(dtype).name} resolves only '
-            f'{step:.2g} m')
-  return None
-
-
-def check_cloud(points: np.ndarray, name: str = 'cloud', dtype=np.float32) -> np.ndarray:
-  """Validate a cloud for the library's functions: [N, 3] finite `dtype` metres, or a
-  ValueError naming the problem (shape, empty, NaN/Inf rows, coordinates too far from
-  the origin for `dtype`; `registration.pipeline.register` centres clouds first)."""
-  points = np.asarray(points)
-  if points.ndim != 2 or points.shape[1] != 3:
-    raise ValueError(f'{name}: expected points of shape [N, 3], got {points.shape}')
-  if len(points) == 0:
-    raise ValueError(f'{name}: the cloud is empty')
-  if not np.issubdtype(points.dtype, np.number):
-    raise ValueError(f'{name}: expected numbers, got dtype {points.dtype}')
-  points = points.astype(np.promote_types(points.dtype, dtype), copy=False)
-  if not np.all(np.isfinite(points)):
-    raise ValueError(f'{name}: {int((~np.isfinite(points).all(1)).sum())} points have NaN/Inf '
-                     'coordinates; drop them first (ssd_jax.data.pipeline.clean_cloud)')
-  problem = _resolution_problem(points, dtype)
-  if problem:
-    raise ValueError(f'{name}: {problem}; subtract an offset first '
-                     '(registration.pipeline.register centres both clouds in float64)')
-  return points.astype(dtype, copy=False)
-
-
-def clean_cloud(points: np.ndarray, name: str = 'cloud', dtype=np.float32) -> np.ndarray:
-  """Drop rows with NaN/Inf coordinates; refuse empty or single-location clouds and
-  coordinates that the source's or `dtype`'s precision cannot resolve to 1 cm.
-
-  points [N, 3] -> [M, 3] `dtype` (float64 keeps far-from-origin coordinates for
-  `registration.pipeline.register`, which centres them), M <= N. Dropped rows are logged.
-  """
-  points = np.asarray(points)
-  if points.ndim != 2 or points.shape[1] != 3:
-    raise CloudDataError(f'{name}: expected points of shape [N, 3], got {points.shape}')
-  source = points.dtype if np.issubdtype(points.dtype, np.floating) else np.float64
-  finite = np.all(np.isfinite(points), axis=1)
-  if not finite.all():
-    logging.warning('%s: dropped %d of %d points with NaN/Inf coordinates', name,
-                    int((~finite).sum()), len(points))
-    points = points[finite]
-  if len(points) == 0:
-    raise CloudDataError(f'{name}: no finite points')
-  for kind in (source, dtype):
-    problem = _resolution_problem(points, kind)
-    if problem:
-      hint = ('store it in float64 or nearer the origin' if kind == source else
-              'centre it first, or register it with registration.pipeline.register')
-      raise CloudDataError(f'{name}: {problem}; {hint}')
-  points = np.asarray(points, dtype)
-  if np.all(np.ptp(points, axis=0) == 0):
-    raise CloudDataError(f'{name}: degenerate cloud, all {len(points)} points coincide '
-                         f'at {points[0].tolist()}')
-  return points
 
 
 def crop(points: np.ndarray, radius: float) -> np.ndarray:
@@ -131,7 +58,7 @@ class CloudDataset:
                min_points: int = 1, cache_size: int = 512,
                rotations: Sequence[np.ndarray | None] | None = None):
     if not files:
-      raise CloudDataError('the dataset has no files')
+      raise clean.CloudDataError('the dataset has no files')
     self.files = [Path(f) for f in files]
     self.rotations = list(rotations) if rotations is not None else [None] * len(self.files)
     self.fmt, self.crop_radius, self.min_points = fmt, crop_radius, min_points
@@ -147,12 +74,12 @@ class CloudDataset:
 
   def _load_uncached(self, i: int) -> np.ndarray:
     path = self.files[i]
-    pts = clean_cloud(io.read_cloud(path, self.fmt), str(path))
+    pts = clean.clean_cloud(io.read_cloud(path, self.fmt), str(path))
     if self.rotations[i] is not None:
       pts = pts @ np.asarray(self.rotations[i], np.float32).T
     pts = crop(pts, self.crop_radius)
     if len(pts) < max(self.min_points, 1):
-      raise CloudDataError(
+      raise clean.CloudDataError(
           f'{path}: {len(pts)} points within {self.crop_radius} m of the origin, fewer than '
           f'the {self.min_points} required; is the cloud centred on its sensor?')
     return pts
@@ -200,7 +127,7 @@ def scene_rotations(files: Sequence[os.PathLike]) -> list[np.ndarray | None]:
     if pose_file not in poses:
       poses[pose_file] = kitti.read_poses(pose_file)
     if not f.stem.isdigit() or int(f.stem) >= len(poses[pose_file]):
-      raise CloudDataError(f'{f}: beside {pose_file} ({len(poses[pose_file])} poses), a '
+      raise clean.CloudDataError(f'{f}: beside {pose_file} ({len(poses[pose_file])} poses), a '
                            'cloud must be named by its frame number (000123.bin); use '
                            "data.triplet_axes='stored' to keep the clouds as stored")
     out.append(poses[pose_file][int(f.stem), :3, :3])
@@ -225,13 +152,13 @@ class TripletDataset:
   def __init__(self, source: str | os.PathLike, axes: str = 'scene', positives: str = 'index',
                **kwargs):
     if axes not in TRIPLET_AXES:
-      raise CloudDataError(f'axes must be one of {TRIPLET_AXES}, got {axes!r}')
+      raise clean.CloudDataError(f'axes must be one of {TRIPLET_AXES}, got {axes!r}')
     if positives not in TRIPLET_POSITIVES:
-      raise CloudDataError(f'positives must be one of {TRIPLET_POSITIVES}, got {positives!r}')
+      raise clean.CloudDataError(f'positives must be one of {TRIPLET_POSITIVES}, got {positives!r}')
     source = Path(source)
     index = source / 'train.txt' if source.is_dir() else source
     if not index.is_file():
-      raise CloudDataError(f'{source}: triplet training needs a 3DFeat-Net train.txt (file | '
+      raise clean.CloudDataError(f'{source}: triplet training needs a 3DFeat-Net train.txt (file | '
                            'positives | non-negatives); none found')
     entries = io.read_oxford_index(index)
     n = len(entries)
@@ -246,12 +173,12 @@ class TripletDataset:
     for i, e in enumerate(entries):
       bad = [j for j in (*e.positives, *e.non_negatives) if not 0 <= j < n]
       if bad:
-        raise CloudDataError(f'{index}: line {i + 1} refers to clouds {bad[:5]} of only {n}')
+        raise clean.CloudDataError(f'{index}: line {i + 1} refers to clouds {bad[:5]} of only {n}')
       self.negatives.append(np.setdiff1d(np.arange(n), [i, *e.positives, *e.non_negatives]))
     self.anchors = np.array([i for i in range(n) if len(self.positives[i]) and
                              len(self.negatives[i])], np.int64)
     if not len(self.anchors):
-      raise CloudDataError(f'{index}: no cloud has both a positive and a negative; triplets '
+      raise clean.CloudDataError(f'{index}: no cloud has both a positive and a negative; triplets '
                            'need clouds less than ~10 m and more than ~50 m apart')
 
   def __len__(self) -> int:

@@ -3,10 +3,10 @@
 Commands (Oxford RobotCar as processed by 3DFeat-Net):
 
     # stage 1: descriptor only (no orientation, no attention), 2 epochs
-    python -m experiments.train --config=configs/3dfeatnet_paper.py:pretrain \
+    python -m experiments.train --config=configs/feat3dnet_paper.py:pretrain \
         --workdir=runs/feat3dnet_paper_pretrain --config.data.path=/data/oxford/train/train.txt
     # stage 2: the full model, descriptor weights from stage 1, detector fresh, ~70 epochs
-    python -m experiments.train --config=configs/3dfeatnet_paper.py \
+    python -m experiments.train --config=configs/feat3dnet_paper.py \
         --workdir=runs/feat3dnet_paper --config.data.path=/data/oxford/train/train.txt
 
 Triplets (anchor, positive < 10 m, negative: neither positive nor non-negative)
