@@ -11,7 +11,7 @@ from __future__ import annotations
 import gc
 import os
 import sys
-from typing import Any
+from typing import Any, Callable
 
 from absl import logging
 import jax
@@ -33,16 +33,32 @@ def _reason(error: Exception) -> str:
   return f'{type(error).__name__}: {line[:160]}' if line else type(error).__name__
 
 
+def _is_failed_read(unraisable) -> bool:
+  """An orbax array read of a damaged checkpoint, failing after the first one was
+  reported (the coroutine, or the tensorstore error it left in a future)."""
+  name = getattr(unraisable.object, '__qualname__', '') or repr(unraisable.object)
+  text = str(unraisable.exc_value)
+  return ('_read_array' in name or 'Encountered error while reading array' in text
+          or ('OUT_OF_RANGE' in text and 'OCDBT' in text) or 'Event loop is closed' in text)
+
+
 def _drop_failed_reads() -> None:
-  """Collect the sibling reads of a failed restore now, without their tracebacks: each
-  array of a damaged checkpoint fails alike, and Python would print every one ("Exception
-  ignored in coroutine") when they are garbage-collected; the first is reported."""
+  """From now on, drop the tracebacks of a failed restore's sibling reads: each array of
+  a damaged checkpoint fails alike, and Python would print every one ("Exception
+  ignored in coroutine", a hundred lines) whenever they are garbage-collected, even at
+  exit; the first failure is reported as a CheckpointError. Anything else still goes to
+  the previous hook."""
   previous = sys.unraisablehook
-  sys.unraisablehook = lambda unraisable: None
-  try:
-    gc.collect()
-  finally:
-    sys.unraisablehook = previous
+  if getattr(previous, 'drops_failed_reads', False):
+    return
+
+  def hook(unraisable):
+    if not _is_failed_read(unraisable):
+      previous(unraisable)
+
+  hook.drops_failed_reads = True
+  sys.unraisablehook = hook
+  gc.collect()
 
 
 class Checkpointer:
@@ -115,14 +131,22 @@ class Checkpointer:
     """The config stored with a checkpoint (default latest), without the state."""
     return self._restore(step, config=ocp.args.JsonRestore())['config']
 
-  def restore_latest_intact(self, abstract_state: Any) -> tuple[Any, dict]:
+  def restore_latest_intact(self, abstract_state: Any,
+                            check_config: Callable[[dict], None] = lambda config: None,
+                            ) -> tuple[Any, dict]:
     """Restore the newest checkpoint that reads back whole; each damaged newer one is
     logged in one line and moved aside to `<step>.damaged` (so that training can save
-    that step again). Raises CheckpointError when none is intact."""
+    that step again). Raises CheckpointError when none is intact.
+
+    `check_config(stored_config)` runs before the state is read and may raise: a run
+    stored with another model is refused as such, never taken for a damaged one."""
     damaged = []
     for step in reversed(self.all_steps()):
       try:
-        return self.restore(abstract_state, step)
+        config = self.restore_config(step)
+        check_config(config)
+        state, _ = self.restore(abstract_state, step)
+        return state, config
       except CheckpointError as e:
         aside = self._step_path(step) + DAMAGED_SUFFIX
         os.replace(self._step_path(step), aside)

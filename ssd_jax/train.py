@@ -366,8 +366,9 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
                                  t_cfg.keep_checkpoints)
   state = replicate(create_train_state(config, jax.random.key(config.seed)), mesh)
   if ckpt.latest_step() is not None:
-    state, stored = ckpt.restore_latest_intact(checkpoint.abstract_like(state))
-    check_resumable(config, stored, ckpt.directory)
+    state, _ = ckpt.restore_latest_intact(
+        checkpoint.abstract_like(state),
+        lambda stored: check_resumable(config, stored, ckpt.directory))
     logging.info('Resumed from step %d in %s', int(state.step), ckpt.directory)
   elif t_cfg.get('init_from'):
     state = replicate(initialize_from(jax.device_get(state), t_cfg.init_from, config), mesh)

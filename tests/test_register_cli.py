@@ -78,7 +78,7 @@ def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
              '--descriptor=learned', f'--groundtruth={folder / "groundtruths.txt"}',
              f'--json={tmp_path / "r.json"}')
   assert out.returncode == 0, out.stderr[-3000:]
-  result = json.loads((tmp_path / 'new' / 'r.json').read_text())
+  result = json.loads((tmp_path / 'r.json').read_text())
   assert result['descriptor'] == 'learned' and result['model'] == 'ours'
   assert result['errors']['success'], result
 
