@@ -44,6 +44,20 @@ flags.DEFINE_integer('draws', 0, 'Average this many samplings of each ball (0: a
                      'checkpoint says).')
 flags.mark_flags_as_required(['run'])
 
+# The default sets and the commands that make them.
+_MADE_BY = {
+    'data_cache/synthetic_small/test_kitti': 'python -m experiments.make_synthetic '
+                                             '--config=configs/synthetic_small.py '
+                                             '--out=data_cache/synthetic_small',
+    'data_cache/synthetic_small/test_oxford': 'python -m experiments.make_synthetic '
+                                              '--config=configs/synthetic_small.py '
+                                              '--out=data_cache/synthetic_small',
+    'data_cache/synthetic_kitti_yaw/test_kitti': 'python -m experiments.make_synthetic '
+                                                 '--config=configs/synthetic_kitti_yaw.py '
+                                                 '--out=data_cache/synthetic_kitti_yaw',
+    'data_cache/real_pairs': 'python -m experiments.make_real_pairs',
+}
+
 
 def _named(spec: str, what: str) -> tuple[str, str]:
   name, sep, path = spec.partition('=')
@@ -83,6 +97,9 @@ def main(argv):
     sets = {}
     for spec in FLAGS.set:
       name, path = _named(spec, 'set')
+      if not os.path.exists(path) and path in _MADE_BY:
+        raise ValueError(f'{path}: no such test set; make it with {_MADE_BY[path]} '
+                         '(or leave it out with --set=NAME=DIR for the sets you have)')
       sets[name] = benchmarks.read_registration_set(path)
     wanted = [int(s) for s in FLAGS.steps]
     checkpoints = []
