@@ -30,6 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ssd_jax import grouping, train  # pylint: disable=g-import-not-at-top,wrong-import-position
+
 FLAGS = flags.FLAGS
 flags.DEFINE_list('configs', ['paper', 'cpu_small'], 'Config modules under configs/.')
 flags.DEFINE_integer('steps', 5, 'Timed steps per config (after compilation).')
@@ -74,7 +76,6 @@ def synthetic_batch(config, seed: int = 0) -> np.ndarray:
 
 
 def bench_config(name: str, steps: int, breakdown: bool) -> dict:
-  from ssd_jax import train  # pylint: disable=g-import-not-at-top
   config = importlib.import_module(f'configs.{name}').get_config()
   mesh = train.make_mesh()
   step = train.jit_train_step(config, mesh)
@@ -111,7 +112,6 @@ def bench_config(name: str, steps: int, breakdown: bool) -> dict:
 
 def time_parts(config) -> dict:
   """Seconds of FPS, ball query + grouping and network forward+backward, alone."""
-  from ssd_jax import grouping, train  # pylint: disable=g-import-not-at-top
   m = config.model
   both = jnp.asarray(np.concatenate([synthetic_batch(config)] * 2))
   valid = jnp.ones(both.shape[:2], bool)

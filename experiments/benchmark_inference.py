@@ -15,9 +15,10 @@ from absl import flags
 import jax
 import numpy as np
 
-from configs import paper
+from configs import paper, synthetic
 from ssd_jax import cli, inference, train
-from ssd_jax.data import io
+from ssd_jax.data import io, preprocess
+from ssd_jax.synthetic import dataset
 from ssd_jax.registration import features
 
 FLAGS = flags.FLAGS
@@ -29,10 +30,8 @@ flags.DEFINE_integer('repeats', 3, 'Timed repeats (median).')
 def _cloud():
   if FLAGS.cloud:
     return io.read_cloud(FLAGS.cloud)
-  from configs import synthetic  # pylint: disable=g-import-not-at-top
-  from ssd_jax.data import preprocess  # pylint: disable=g-import-not-at-top
-  from ssd_jax.synthetic import dataset  # pylint: disable=g-import-not-at-top
-  pts = preprocess.voxel_downsample(dataset.make_drive(synthetic.get_config(), 'test_oxford', 0).scan(3), 0.2)
+  drive = dataset.make_drive(synthetic.get_config(), 'test_oxford', 0)
+  pts = preprocess.voxel_downsample(drive.scan(3), 0.2)
   pts = pts[np.linalg.norm(pts[:, :2], axis=1) < 30]
   return pts[np.random.default_rng(0).choice(len(pts), 16384, replace=len(pts) < 16384)]
 

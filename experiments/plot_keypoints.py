@@ -11,7 +11,7 @@ it needs a checkpoint whose attention head was trained (the weakly supervised
 from absl import app
 from absl import flags
 
-from ssd_jax import cli, viz
+from ssd_jax import cli, inference, viz
 from ssd_jax.data import clean, io
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import pipeline
@@ -37,7 +37,6 @@ def main(argv):
     points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
     model = None
     if FLAGS.checkpoint:
-      from ssd_jax import inference  # pylint: disable=g-import-not-at-top
       model = inference.load(FLAGS.checkpoint)
   except (io.CloudFileError, FileNotFoundError, ValueError) as e:
     raise SystemExit(f'error: {e}') from None
