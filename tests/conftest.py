@@ -1,11 +1,12 @@
-"""Shared fixtures: the real scans beside the project and a tiny training config."""
+"""Shared fixtures and helpers: the real scans beside the project, a tiny synthetic
+dataset and a tiny training config."""
 
 import os
 from pathlib import Path
 
 import pytest
 
-from configs import cpu_small
+from configs import cpu_small, synthetic
 
 SHARED_DATA = Path(os.environ.get('SSD_JAX_SHARED_DATA',
                                   Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data'))
@@ -18,13 +19,29 @@ def shared_path(*parts) -> Path:
   return path
 
 
+def tiny_synthetic_config(seed=0):
+  """The synthetic generator shrunk to seconds: one short scene per split."""
+  config = synthetic.get_config()
+  config.seed = seed
+  config.scene_length = 80.0
+  config.lidar.azimuth_step = 0.4
+  config.train.num_scenes = 1
+  config.train.spacing = 15.0
+  config.test_kitti.num_scenes = 1
+  config.test_oxford.num_scenes = 1
+  config.test_oxford.num_points = 4096
+  config.clusters.num_scenes = 1
+  config.clusters.num_pairs = 6
+  config.clusters.min_points = 16
+  return config
+
+
 @pytest.fixture(scope='session')
 def synthetic_root(tmp_path_factory):
   """A tiny synthetic data root (train/ of 2 scenes, test_kitti/, test_oxford/, clusters/ with
   24 pairs)."""
   from ssd_jax.synthetic import dataset  # pylint: disable=g-import-not-at-top
-  from tests.test_synthetic import tiny_config as synthetic_config  # pylint: disable=g-import-not-at-top
-  config = synthetic_config()
+  config = tiny_synthetic_config()
   config.clusters.num_pairs = 24
   config.train.num_scenes = 2     # clouds of another scene are the triplet negatives
   out = tmp_path_factory.mktemp('synthetic_root') / 'tiny'

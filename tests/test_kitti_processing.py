@@ -7,7 +7,7 @@ from experiments import process_kitti
 from ssd_jax import geometry
 from ssd_jax.data import groundtruth, io, kitti
 from ssd_jax.synthetic import dataset
-from tests.test_synthetic import tiny_config
+from tests.conftest import tiny_synthetic_config as tiny_config
 
 # KITTI-like velodyne -> camera: camera x right, y down, z forward.
 TR = np.array([[0.0, -1.0, 0.0, 0.01], [0.0, 0.0, -1.0, -0.07], [1.0, 0.0, 0.0, -0.27],

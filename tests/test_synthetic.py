@@ -10,26 +10,10 @@ import numpy as np
 import pytest
 from scipy import spatial
 
-from configs import synthetic
 from ssd_jax import geometry
 from ssd_jax.data import datasets, groundtruth, io
 from ssd_jax.synthetic import dataset, lidar, realism, scene as scene_lib
-
-
-def tiny_config(seed=0):
-  config = synthetic.get_config()
-  config.seed = seed
-  config.scene_length = 80.0
-  config.lidar.azimuth_step = 0.4
-  config.train.num_scenes = 1
-  config.train.spacing = 15.0
-  config.test_kitti.num_scenes = 1
-  config.test_oxford.num_scenes = 1
-  config.test_oxford.num_points = 4096
-  config.clusters.num_scenes = 1
-  config.clusters.num_pairs = 6
-  config.clusters.min_points = 16
-  return config
+from tests.conftest import tiny_synthetic_config as tiny_config
 
 
 @pytest.fixture(scope='module')

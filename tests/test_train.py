@@ -11,10 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from configs import cpu_robust
+from configs import cpu_robust, cpu_small
 from ssd_jax import checkpoint, inference, train
 from ssd_jax.data import datasets
-from tests.conftest import shared_path
+from ssd_jax.synthetic import dataset
+from tests.conftest import shared_path, tiny_synthetic_config
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -173,14 +174,11 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
   Compares medians of 5-step means: at batch 2 the loss is heavy-tailed (a hard batch
   whose CF rotation fails costs ~10x the median), so one unlucky window late in a short
   run must not decide, while a run that stops learning still fails."""
-  from configs import cpu_small
   config = cpu_small.get_config()
   config.progress_bar = False
   config.data.eval_path = ''
   if source == 'synthetic':
-    from ssd_jax.synthetic import dataset  # pylint: disable=g-import-not-at-top
-    from tests.test_synthetic import tiny_config as synthetic_config  # pylint: disable=g-import-not-at-top
-    dataset.generate(synthetic_config(), tmp_path / 'synthetic')
+    dataset.generate(tiny_synthetic_config(), tmp_path / 'synthetic')
     config.data.path = str(tmp_path / 'synthetic' / 'train')
   else:
     config.data.path = str(shared_path(*source))
