@@ -88,6 +88,14 @@ def test_bin_layouts_that_used_to_be_guessed_wrong(tmp_path):
   kitti[: len(kitti) // 2 * 2, :3].tofile(tmp_path / 'narrow.bin')
   with pytest.raises(io.CloudFileError, match="read as 'xyz64'"):
     io.read_cloud(tmp_path / 'narrow.bin', 'xyz64')
+  # A small crop centred on one of its points holds float32 subtraction residues (1e-7 m):
+  # still a cloud (the synthetic cluster crops of Table III have them).
+  oxford = np.fromfile(shared_path('example', 'oxford_270.bin'), '<f4').reshape(-1, 6)[:90]
+  crop = oxford.copy()
+  crop[:, :3] -= crop[0, :3]
+  crop[1:20, 0] = 1.2e-7
+  crop.tofile(tmp_path / 'crop.bin')
+  assert io.read_cloud(tmp_path / 'crop.bin').shape == (90, 3)
   # Bytes that are no cloud in any layout: every layout tried is named with its reason.
   np.random.default_rng(0).integers(0, 256, 48_000, np.uint8).tofile(tmp_path / 'noise.bin')
   with pytest.raises(io.CloudFileError, match=r'fit no .bin layout \(xyzn: .*xyz64: '):
