@@ -2,6 +2,7 @@
 `experiments.reproduce` end to end on a tiny synthetic data root."""
 
 import csv
+import json
 import dataclasses
 import os
 import subprocess
@@ -13,8 +14,8 @@ import pytest
 
 from ssd_jax import geometry, inference, train
 from ssd_jax.data import benchmarks, clusters, io
-from ssd_jax.evaluation import (descriptor_matching, feature_store, learning_curve, precision,
-                                registration, repeatability)
+from ssd_jax.evaluation import (descriptor_matching, feature_store, fingerprint, learning_curve,
+                                precision, registration, repeatability)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -304,3 +305,27 @@ def test_rotation_sweep_separates_equivariant_and_paper_heads(tiny_checkpoint, t
   ours = orientation.rotation_sweep(pretrained.load('ours'), points, centers, [0, 90, 180])
   for r in ours:
     assert r['orientation_error_deg'] < 0.1 and r['self_match_rate'] == 1.0, r
+
+
+def test_fingerprints_tell_stages_apart(tmp_path):
+  a = np.arange(12, dtype=np.float32).reshape(4, 3)
+  assert fingerprint.digest([a]) == fingerprint.digest([a.copy()])
+  assert len(fingerprint.digest([a])) == 12
+  b = a.copy()
+  b[2, 1] = np.nextafter(b[2, 1], np.inf, dtype=np.float32)   # one ulp
+  assert fingerprint.digest([b]) != fingerprint.digest([a])
+  assert fingerprint.digest([a.astype(np.float64)]) != fingerprint.digest([a])
+  assert fingerprint.digest([a.reshape(3, 4)]) != fingerprint.digest([a])
+  log = tmp_path / 'table_x_pairs.jsonl'
+  rows = [{'row': r, 'trials': t, 'inliers': 5, 'rte': 0.1, 'rre': 0.2}
+          for r, t in (('iss+fpfh', 10), ('iss+ours', 20), ('iss+fpfh', 30))]
+  log.write_text(''.join(json.dumps(r) + '\n' for r in rows))
+  first = fingerprint.registration_digests(log)
+  assert sorted(first) == ['iss+fpfh', 'iss+ours']
+  rows[2]['rte'] = 0.1000001
+  log.write_text(''.join(json.dumps(r) + '\n' for r in rows))
+  second = fingerprint.registration_digests(log)
+  assert second['iss+ours'] == first['iss+ours'] and second['iss+fpfh'] != first['iss+fpfh']
+  env = fingerprint.environment()
+  assert env['jax'] != 'not installed' and 'cores' in env['cpu']
+  assert '| jax |' in fingerprint.markdown({'keypoints: iss': 'abc'}, env)
