@@ -35,10 +35,10 @@ REPRODUCIBILITY = (
     'The same command on the same machine writes the same numbers (every stage is '
     'seeded). Across machines, a short hash of each stage\'s output below tells where two '
     'reports part: the first differing row is the stage to look at. The generated data, '
-    'ISS keypoints, FPFH and learned descriptors and RANSAC do not depend on the CPU\'s '
-    'vector instructions or thread count; training does (XLA\'s CPU code rounds '
-    'differently without AVX2), so a run trained on another CPU gives other weights and '
-    'other "this run" rows: docs/reproduce.md gives the measured spread.')
+    'ISS keypoints and FPFH do not depend on the thread count or the CPU\'s vector '
+    'instructions; the learned descriptors and RANSAC fits do not either between AVX2 and '
+    'AVX-512, but differ in their last bits on a CPU without AVX, and training there gives '
+    'other weights and other "this run" rows: docs/reproduce.md gives the measured spread.')
 
 TITLES = {'oxford': 'Table I: registration on Oxford-style pairs',
           'kitti': 'Table II: registration on KITTI-style pairs'}

@@ -35,6 +35,12 @@ def rotation_z(theta: jax.Array) -> jax.Array:
   return xp.stack(rows, -2)
 
 
+def yaw_deg(transform: jax.Array) -> jax.Array:
+  """Rotation about z of transforms or rotations [..., 3+, 3+], degrees in (-180, 180]."""
+  xp = _xp(transform)
+  return xp.rad2deg(xp.arctan2(transform[..., 1, 0], transform[..., 0, 0]))
+
+
 def random_z_angle(key: jax.Array, shape: tuple[int, ...], sigma: float,
                    clip: float | None = None) -> jax.Array:
   """Angles phi ~ N(0, sigma^2) radians, optionally clipped to [-clip, clip] (paper §III-D)."""

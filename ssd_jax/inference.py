@@ -49,8 +49,8 @@ class Model:
     step: the training step, for models restored by `load`.
     draws: `describe` averages the descriptors of this many random samplings of each
       ball (1: one sampling, as in training). A cluster holds c points drawn from the
-      ~100-300 points of a 2 m ball in a 0.2 m-voxel scan, so one draw carries sampling
-      noise that averaging removes, at `draws` times the network cost.
+      hundreds of points a ball holds in a 0.2 m-voxel scan, so one draw carries
+      sampling noise that averaging removes, at `draws` times the network cost.
   """
   net: network.FeatureNet
   variables: Any
@@ -195,16 +195,21 @@ def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: st
   """
   points = check_cloud(points)
   keypoints = check_cloud(keypoints, 'keypoints')
-  if model.draws < 1:
-    raise ValueError(f'model.draws must be >= 1, got {model.draws}')
-  total = 0.0
-  for draw in range(model.draws):
-    # Draw 0 is the seed's own order, so draws=1 is exactly the single-sampling result.
-    order_seed = seed if draw == 0 else (seed, draw)
-    total = total + np.concatenate(_chunks(model, shuffled(points, order_seed), keypoints,
-                                           'describe', search, chunk))
-  if model.draws == 1:
+  return _mean_over_draws(model.draws, seed, lambda order_seed: np.concatenate(
+      _chunks(model, shuffled(points, order_seed), keypoints, 'describe', search, chunk)))
+
+
+def _mean_over_draws(draws: int, seed: int, describe_once) -> np.ndarray:
+  """The L2-normalised mean of `describe_once(order_seed)` [K, D] over `draws` orders of
+  the points (each a different sampling of every ball). Draw 0 is the seed's own order,
+  so draws=1 is exactly the single-sampling result."""
+  if draws < 1:
+    raise ValueError(f'model.draws must be >= 1, got {draws}')
+  total = describe_once(seed)
+  if draws == 1:
     return total
+  for draw in range(1, draws):
+    total = total + describe_once((seed, draw))
   return (total / np.linalg.norm(total, axis=1, keepdims=True).clip(1e-12)).astype(np.float32)
 
 
@@ -222,16 +227,9 @@ def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, c
              else check_cloud(centers, 'centers'))
   if len(centers) != len(clouds):
     raise ValueError(f'{len(clouds)} clouds but {len(centers)} centers')
-  if model.draws < 1:
-    raise ValueError(f'model.draws must be >= 1, got {model.draws}')
   clouds = [check_cloud(cloud, f'cloud {k}') for k, cloud in enumerate(clouds)]
-  total = 0.0
-  for draw in range(model.draws):
-    order_seed = seed if draw == 0 else (seed, draw)
-    total = total + _describe_clusters_once(model, clouds, centers, chunk, order_seed)
-  if model.draws == 1:
-    return total
-  return (total / np.linalg.norm(total, axis=1, keepdims=True).clip(1e-12)).astype(np.float32)
+  return _mean_over_draws(model.draws, seed, lambda order_seed: _describe_clusters_once(
+      model, clouds, centers, chunk, order_seed))
 
 
 def _describe_clusters_once(model: Model, clouds, centers: np.ndarray, chunk: int,

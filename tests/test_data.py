@@ -96,6 +96,14 @@ def test_bin_layouts_that_used_to_be_guessed_wrong(tmp_path):
   crop[1:20, 0] = 1.2e-7
   crop.tofile(tmp_path / 'crop.bin')
   assert io.read_cloud(tmp_path / 'crop.bin').shape == (90, 3)
+  # A named layout keeps the file's NaN rows (missing returns) for clean_cloud to drop;
+  # detection, which must tell layouts apart, refuses more than 1 % of them.
+  holes = kitti.copy()
+  holes[::20, :3] = np.nan
+  holes.tofile(tmp_path / 'holes.bin')
+  assert np.isnan(io.read_cloud(tmp_path / 'holes.bin', 'xyzi')).any(axis=1).sum() == len(holes[::20])
+  with pytest.raises(io.CloudFileError, match='% of the rows are not finite'):
+    io.read_cloud(tmp_path / 'holes.bin')
   # Bytes that are no cloud in any layout: every layout tried is named with its reason.
   np.random.default_rng(0).integers(0, 256, 48_000, np.uint8).tofile(tmp_path / 'noise.bin')
   with pytest.raises(io.CloudFileError, match=r'fit no .bin layout \(xyzn: .*xyz64: '):

@@ -3,6 +3,7 @@
 import numpy as np
 from scipy import spatial
 
+from ssd_jax import geometry
 from ssd_jax.data import benchmarks, io, rescan
 from ssd_jax.evaluation import learning_curve
 from tests.conftest import shared_path
@@ -11,7 +12,7 @@ from tests.conftest import shared_path
 def test_rescan_pair_is_a_different_sampling_that_the_transform_aligns():
   points = io.read_cloud(shared_path('example', 'oxford_270.bin'))
   cloud1, cloud2, t12 = rescan.rescan_pair(np.random.default_rng(0), points, 130.0)
-  assert abs(rescan.yaw_deg(t12) - 130.0) < 1e-9
+  assert abs(geometry.yaw_deg(t12) - 130.0) < 1e-9
   assert 2.0 <= np.linalg.norm(t12[:2, 3]) <= 10.0 and t12[2, 3] == 0
   moved = cloud2 @ t12[:3, :3].T + t12[:3, 3]
   dist, _ = spatial.cKDTree(cloud1).query(moved)

@@ -47,7 +47,7 @@ class CloudDataset:
 
   Args:
     files: cloud files.
-    fmt: `.bin` row layout ('auto', 'xyz', 'xyzi', 'xyzn').
+    fmt: `.bin` row layout: 'auto' or a key of `io.BIN_FORMATS`.
     crop_radius: metres, <= 0 to keep everything.
     min_points: clouds with fewer points after cropping are an error.
     cache_size: clouds kept in memory.

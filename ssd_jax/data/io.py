@@ -50,12 +50,12 @@ def _looks_like_normals(rows: np.ndarray) -> bool:
   return bool(np.mean(norms <= 1.01) > 0.99 and np.median(norms) > 0.9)
 
 
-def _coordinate_problem(xyz: np.ndarray) -> str | None:
+def _coordinate_problem(xyz: np.ndarray, max_nonfinite: float = 0.01) -> str | None:
   """Why columns 0:3 [N, 3] (float64) cannot be metres, or None. Bytes of another
   type or width read as floats give non-finite, astronomically large or denormal-small
-  values."""
+  values; a cloud may hold up to `max_nonfinite` of NaN rows (missing returns)."""
   finite = np.isfinite(xyz).all(axis=1)
-  if finite.mean() < 0.99:
+  if 1 - finite.mean() > max_nonfinite:
     return f'{100 * (1 - finite.mean()):.0f} % of the rows are not finite'
   mag = np.abs(xyz[finite])
   if mag.size and mag.max() > MAX_COORDINATE:
@@ -155,7 +155,9 @@ def read_bin(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
       raise CloudFileError(f'{path}: {size} bytes is not a whole number of {width}-column '
                            f'{np.dtype(dtype).name} rows (format {fmt!r}); truncated file or '
                            'wrong format?')
-    problem = _coordinate_problem(rows[:, :3])
+    # Named: NaN rows are the file's own (clean_cloud drops them); only values no
+    # cloud holds say the layout is wrong.
+    problem = _coordinate_problem(rows[:, :3], max_nonfinite=1.0)
     if problem:
       raise CloudFileError(f'{path}: read as {fmt!r} it holds {problem}: wrong --format?')
   dtype, width = BIN_FORMATS[fmt]

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ssd_jax import geometry
 from ssd_jax.data import clean, groundtruth, io
 
 
@@ -88,11 +89,6 @@ def rescan_pair(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
   return cloud1, cloud2, transform
 
 
-def yaw_deg(transform: np.ndarray) -> float:
-  """The rotation of T [4, 4] about z, in degrees in (-180, 180]."""
-  return float(np.rad2deg(np.arctan2(transform[1, 0], transform[0, 0])))
-
-
 def make_rescan_set(sources: list, out: str | os.PathLike, seed: int = 0,
                     pairs_per_cloud: int = 8, cfg: RescanConfig = RescanConfig(),
                     progress=None) -> list[dict]:
@@ -120,7 +116,7 @@ def make_rescan_set(sources: list, out: str | os.PathLike, seed: int = 0,
       io.write_bin(out / f'{2 * n + 1:06d}.bin', cloud2)
       gts.append(groundtruth.GroundTruthPair(2 * n, 2 * n + 1, transform))
       rows.append({'idx1': 2 * n, 'idx2': 2 * n + 1, 'source': Path(source).name,
-                   'yaw_deg': yaw_deg(transform), 'points': [len(cloud1), len(cloud2)]})
+                   'yaw_deg': float(geometry.yaw_deg(transform)), 'points': [len(cloud1), len(cloud2)]})
       n += 1
       if progress is not None:
         progress(1)

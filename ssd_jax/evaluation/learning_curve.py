@@ -16,6 +16,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from ssd_jax import geometry
 from ssd_jax.evaluation import feature_store, precision, registration
 from ssd_jax.registration import features as features_lib, metrics
 
@@ -27,7 +28,7 @@ COLUMNS = (('run', 'step', 'set', 'row', 'pairs', 'success', 'rte', 'rre', 'rre_
 
 def relative_yaw_deg(transform: np.ndarray) -> float:
   """|rotation about z| of T [4, 4] in degrees, in [0, 180]."""
-  return float(abs(np.rad2deg(np.arctan2(transform[1, 0], transform[0, 0]))))
+  return float(abs(geometry.yaw_deg(np.asarray(transform))))
 
 
 def yaw_bin(yaw: float) -> int:

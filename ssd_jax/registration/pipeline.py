@@ -14,6 +14,7 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import inference
+from ssd_jax.data import clean
 from ssd_jax.data.clean import check_cloud
 from ssd_jax.registration import features, keypoints as keypoints_lib, matching, ransac
 
@@ -116,15 +117,19 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
              ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
   """The whole pipeline on two clouds, in the caller's coordinates.
 
-  points1 (target) [N1, 3] and points2 (source) [N2, 3] metres, any float type. Both
-  are shifted by one common offset (cloud 1's centroid, in float64) before any float32
-  step, so clouds far from the origin (UTM coordinates) register as accurately as
-  near it; the returned transform T_12 and keypoints are in the input coordinates.
+  points1 (target) [N1, 3] and points2 (source) [N2, 3] metres, any float type. Clouds
+  that float32 cannot resolve to MAX_RESOLUTION (e.g. UTM coordinates) are shifted by
+  one common offset, cloud 1's centroid in float64, before any float32 step, so they
+  register as accurately as near the origin; the returned transform T_12 and keypoints
+  are in the input coordinates. Clouds near the origin are not shifted, so FPFH's
+  normals keep facing the sensor there, exactly as `cloud_features` computes them.
   -> (registration, features of cloud 1, features of cloud 2).
   """
   clouds = [check_cloud(p, name, np.float64) for p, name in ((points1, 'cloud 1'),
                                                              (points2, 'cloud 2'))]
-  offset = clouds[0].mean(axis=0)
+  reach = max(float(np.max(np.abs(c))) for c in clouds)
+  near = np.spacing(np.float32(reach)) <= clean.MAX_RESOLUTION
+  offset = np.zeros(3) if near else clouds[0].mean(axis=0)
   local = [check_cloud(c - offset, name) for c, name in zip(clouds, ('cloud 1', 'cloud 2'))]
   f1, f2 = (cloud_features(c, keypoints, descriptor, model, seed, fpfh_max_nn) for c in local)
   reg = estimate(f1, f2, seed)
