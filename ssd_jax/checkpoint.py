@@ -58,7 +58,6 @@ def _drop_failed_reads() -> None:
 
   hook.drops_failed_reads = True
   sys.unraisablehook = hook
-  gc.collect()
 
 
 class Checkpointer:
@@ -108,12 +107,14 @@ class Checkpointer:
     if step not in self._manager.all_steps():
       raise FileNotFoundError(f'no checkpoint at step {step} in {self.directory} '
                               f'(kept: {self.all_steps()})')
+    # Before the read: a failing array's siblings may be collected while it unwinds.
+    _drop_failed_reads()
     try:
       return self._manager.restore(step, args=ocp.args.Composite(**items))
     except Exception as e:  # pylint: disable=broad-except
       # orbax surfaces a damaged file as tensorstore, JSON or plain exceptions.
       reason = _reason(e)
-    _drop_failed_reads()
+    gc.collect()
     raise CheckpointError(f'{self._step_path(step)}: damaged checkpoint ({reason})')
 
   def restore(self, abstract_state: Any | None, step: int | None = None) -> tuple[Any, dict]:
