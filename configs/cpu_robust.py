@@ -23,7 +23,7 @@ run is the shipped `ours` model; docs/results.md has its learning curve and the
 ablation.
 """
 
-from configs import cpu_small
+from ssd_jax.configs import cpu_small
 
 
 def get_config():

@@ -10,7 +10,7 @@ Command:
 It supplies the shipped `ours_detector` model (learned keypoints: attention + NMS).
 """
 
-from configs import cpu_robust
+from ssd_jax.configs import cpu_robust
 
 
 def get_config():

@@ -19,7 +19,7 @@ measured 2026-11-23): the training CF rotation error falls from ~11.5 degrees
 ~7.3 degrees (step 100) to ~2.4 degrees.
 """
 
-from configs import paper
+from ssd_jax.configs import paper
 
 
 def get_config():

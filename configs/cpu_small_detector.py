@@ -13,7 +13,7 @@ training attention this way failed; see the README for what it
 does here.
 """
 
-from configs import cpu_small
+from ssd_jax.configs import cpu_small
 
 
 def get_config():

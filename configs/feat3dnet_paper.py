@@ -18,7 +18,7 @@ training clouds an epoch is ~3,650 steps. The reference's released model is what
 the paper compares with; this config trains the same recipe here.
 """
 
-from configs import paper
+from ssd_jax.configs import paper
 
 EPOCH_STEPS = 3650   # 21,875 Oxford training clouds / batch 6
 

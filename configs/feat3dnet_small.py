@@ -29,8 +29,8 @@ this recipe on training streets with turned street furniture and 4 m clusters, w
 stage 2 does lower its loss; the evaluations' default baseline checkpoint is that run.
 """
 
-from configs import cpu_small
-from configs import feat3dnet_paper as paper_baseline
+from ssd_jax.configs import cpu_small
+from ssd_jax.configs import feat3dnet_paper as paper_baseline
 
 
 def get_config(stage: str = 'full'):

@@ -23,7 +23,7 @@ Rotate1D on), step 0 -> probes at 500, 1,000, ... 3,000: seed 0 0.173 (0.56) -> 
 steps: seed 0 0.155 -> 0.141, seed 1 0.167 -> 0.149 (`--config.seed=1`).
 """
 
-from configs import feat3dnet_small as small
+from ssd_jax.configs import feat3dnet_small as small
 
 
 def get_config(stage: str = 'full'):

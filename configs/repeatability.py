@@ -2,18 +2,18 @@
 detector: the share of cloud-1 keypoints with a cloud-2 keypoint within 0.5 m
 after the ground-truth alignment.
 
-Command (the small synthetic KITTI-style set, after training the detectors):
+Command (the small synthetic KITTI-style set):
 
-    python -m experiments.repeatability --config=configs/repeatability.py \
+    python -m experiments.evaluate --config=configs/repeatability.py \
         --workdir=runs/repeatability_synthetic
 """
 
 import ml_collections
 
-from configs import evaluation
+from ssd_jax.configs import evaluation
 
 
 def get_config() -> ml_collections.ConfigDict:
   config = evaluation.get_config()
-  config.dataset = 'data_cache/synthetic_small/test_kitti'
+  config.evals.repeatability = evaluation.repeatability('data_cache/synthetic_small/test_kitti')
   return config

@@ -2,9 +2,10 @@
 
 Command:
 
-    python -m experiments.reproduce --data_root=DIR --workdir=OUT --config=configs/reproduce.py
+    python -m experiments.evaluate --config=configs/reproduce.py \
+        --config.data_root=DIR --workdir=OUT
 
-DIR may hold (each optional; the first existing candidate of `sets` is used):
+DIR may hold (each optional; the first existing candidate is used):
   * an Oxford test set: DIR/test_oxford, DIR/oxford/test or DIR/oxford
     (test_models/ + groundtruths.txt)                 -> Table I, Fig. 4, Figs. 3 and 5
   * a processed KITTI set: DIR/test_kitti, DIR/kitti/test or DIR/kitti
@@ -19,26 +20,31 @@ and what was skipped. configs/reproduce_small.py is the few-minute CPU variant.
 
 import ml_collections
 
-from configs import descriptor_matching, precision, registration
+from ssd_jax.configs import evaluation
+
+OXFORD = ('test_oxford', 'oxford/test', 'oxford')
+KITTI = ('test_kitti', 'kitti/test', 'kitti')
 
 
 def get_config() -> ml_collections.ConfigDict:
-  config = registration.get_config()
-  del config.dataset, config.paper     # found under --data_root; tables name their set
-  config.sets = ml_collections.ConfigDict({
-      'oxford': ('test_oxford', 'oxford/test', 'oxford'),
-      'kitti': ('test_kitti', 'kitti/test', 'kitti'),
-      'clusters': ('clusters', 'oxford/clusters'),
-  })
-  prec = precision.get_config()
-  config.precision_sets = ('oxford', 'kitti')   # Fig. 4 is Oxford in the paper
-  config.overlap_radius = prec.overlap_radius
-  config.read_at = prec.read_at
-  dm = descriptor_matching.get_config()
-  del dm.clusters, dm.checkpoints, dm.fpfh_max_nn   # from `sets` and this config
-  config.descriptor_matching = dm
-  config.figures = ml_collections.ConfigDict({
-      'keypoint_sources': ('iss', 'feat3dnet'),   # Fig. 3: on the first cloud of the first set
+  config = evaluation.get_config()
+  evals = config.evals
+  evals.table1_oxford = evaluation.registration(
+      OXFORD, 'oxford', 'Table I: registration on Oxford-style pairs')
+  evals.table2_kitti = evaluation.registration(
+      KITTI, 'kitti', 'Table II: registration on KITTI-style pairs')
+  evals.fig4_precision_oxford = evaluation.precision(
+      OXFORD, 'Fig. 4: precision on oxford-style pairs')   # Fig. 4 is Oxford in the paper
+  evals.fig4_precision_kitti = evaluation.precision(KITTI, 'Fig. 4: precision on kitti-style pairs')
+  evals.repeatability_oxford = evaluation.repeatability(
+      OXFORD, 'Keypoint repeatability on oxford-style pairs')
+  evals.repeatability_kitti = evaluation.repeatability(
+      KITTI, 'Keypoint repeatability on kitti-style pairs')
+  evals.descriptor_matching = evaluation.descriptor_matching(('clusters', 'oxford/clusters'))
+  evals.figures = ml_collections.ConfigDict({
+      'type': 'figures', 'title': 'Figures 3, 5 and 6',
+      'sets': {'oxford': OXFORD, 'kitti': KITTI},
+      'keypoint_sources': ('iss', 'feat3dnet'),   # Fig. 3: the first cloud of the first set
       'registration_rows': ('iss+ours', 'feat3dnet+ours'),   # Figs. 5-6: first pair per set
   })
   return config

@@ -2,15 +2,15 @@
 
 Command (the README's main job, which first makes the data and trains runs/main_job):
 
-    python -m experiments.reproduce --data_root=data_cache/synthetic_small \
-        --workdir=runs/reproduce_small --config=configs/reproduce_small.py
+    python -m experiments.evaluate --config=configs/reproduce_small.py \
+        --config.data_root=data_cache/synthetic_small --workdir=runs/reproduce_small
 
 All 53 Oxford-style and 106 KITTI-style pairs and all 2,000 cluster pairs, with
 FPFH's 4 m search capped at 200 neighbours (several times faster than 1,000), the
 shipped pretrained models and the main job's own short run (row "Ours (this run)").
 """
 
-from configs import reproduce
+from ssd_jax.configs import reproduce
 
 
 def get_config():

@@ -12,7 +12,7 @@ about the sensor's z axis by a uniform yaw, so the pairs' relative yaw covers
 test set is written (~40 s). Used by experiments.learning_curve as `kitti_yaw`.
 """
 
-from configs import synthetic_small
+from ssd_jax.configs import synthetic_small
 
 
 def get_config():

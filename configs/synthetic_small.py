@@ -9,7 +9,7 @@ Command:
 (~85 clouds, ~100 pairs), 1 Oxford-style test scene and 2,000 cluster pairs.
 """
 
-from configs import synthetic
+from ssd_jax.configs import synthetic
 
 
 def get_config():

@@ -15,7 +15,7 @@ places apart too weakly for 3DFeat-Net's stage 2 to learn under Rotate1D in a CP
 run (README, "3DFeat-Net baseline"); configs/feat3dnet_small_varied.py trains on it.
 """
 
-from configs import synthetic_small
+from ssd_jax.configs import synthetic_small
 
 
 def get_config():

@@ -76,7 +76,7 @@ def synthetic_batch(config, seed: int = 0) -> np.ndarray:
 
 
 def bench_config(name: str, steps: int, breakdown: bool) -> dict:
-  config = importlib.import_module(f'configs.{name}').get_config()
+  config = importlib.import_module(f'ssd_jax.configs.{name}').get_config()
   mesh = train.make_mesh()
   step = train.jit_train_step(config, mesh)
   state = train.replicate(train.create_train_state(config, jax.random.key(0)), mesh)

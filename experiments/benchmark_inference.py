@@ -15,7 +15,7 @@ from absl import flags
 import jax
 import numpy as np
 
-from configs import paper, synthetic
+from ssd_jax.configs import paper, synthetic
 from ssd_jax import cli, inference, train
 from ssd_jax.data import io, preprocess
 from ssd_jax.synthetic import dataset

@@ -46,5 +46,10 @@ def main(argv):
   print(f'exported step {model.step} of {FLAGS.run} to {out}')
 
 
-if __name__ == '__main__':
+def console():
+  """The `ssd-jax-export` command (pyproject.toml)."""
   cli.run(main)
+
+
+if __name__ == '__main__':
+  console()

@@ -126,5 +126,10 @@ def main(argv):
   print(f'wrote {out}/learning_curve.csv, .md and .png')
 
 
-if __name__ == '__main__':
+def console():
+  """The `ssd-jax-learning-curve` command (pyproject.toml)."""
   cli.run(main)
+
+
+if __name__ == '__main__':
+  console()

@@ -56,5 +56,10 @@ def main(argv):
     print(f'figure: {FLAGS.figure}')
 
 
-if __name__ == '__main__':
+def console():
+  """The `ssd-jax-make-synthetic` command (pyproject.toml)."""
   cli.run(main)
+
+
+if __name__ == '__main__':
+  console()

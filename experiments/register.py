@@ -20,7 +20,7 @@ from absl import app
 from absl import flags
 import numpy as np
 
-from ssd_jax import cli, geometry, pretrained
+from ssd_jax import cli, geometry, pretrained, viz
 from ssd_jax.data import clean, groundtruth, io
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import metrics, pipeline
@@ -127,7 +127,6 @@ def main(argv):
       print(f'vs ground truth: RTE {e["rte"]:.3f} m, RRE {e["rre"]:.2f} deg (Euler sum), '
             f'{e["rre_geodesic"]:.2f} deg (geodesic), success {e["success"]}')
     if FLAGS.plot:
-      from ssd_jax import viz  # pylint: disable=g-import-not-at-top
       root, ext = os.path.splitext(FLAGS.plot)
       path = FLAGS.plot if len(FLAGS.descriptor) == 1 else f'{root}_{descriptor}{ext or ".png"}'
       viz.plot_registration(clouds[0], clouds[1], f1.xyz[reg.matches[:, 0]],
@@ -139,5 +138,10 @@ def main(argv):
       json.dump(results[0] if len(results) == 1 else results, f, indent=1)
 
 
-if __name__ == '__main__':
+def console():
+  """The `ssd-jax-register` command (pyproject.toml)."""
   cli.run(main)
+
+
+if __name__ == '__main__':
+  console()

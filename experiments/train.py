@@ -45,5 +45,10 @@ def main(argv):
     raise SystemExit(f'error: {e}') from None
 
 
-if __name__ == '__main__':
+def console():
+  """The `ssd-jax-train` command (pyproject.toml)."""
   cli.run(main)
+
+
+if __name__ == '__main__':
+  console()

@@ -1,14 +1,50 @@
 """Command-line plumbing shared by the scripts in experiments/: a flag or config
-override that cannot be parsed ends in one line and exit status 2, not a traceback."""
+override that cannot be parsed ends in one line and exit status 2, not a traceback, and
+`--config=configs/x.py` finds the project's own config from any working directory."""
 
 from __future__ import annotations
 
+import importlib.util
+import os
 import sys
 from typing import Callable, Sequence
 
 from absl import app
 from absl import flags
 from ml_collections import config_flags
+
+
+_CONFIG_FLAGS: set[str] = set()   # names of the flags defined by define_config_file
+
+
+def configs_dir() -> str:
+  """The folder of the project's configs (the repository's configs/, installed as
+  ssd_jax.configs)."""
+  return list(importlib.util.find_spec('ssd_jax.configs').submodule_search_locations)[0]
+
+
+def resolve_config_path(value: str) -> str:
+  """'configs/x.py[:arg]' -> the project's configs/x.py when no such file exists here,
+  so the commands of the docs work from any directory; any other value unchanged."""
+  path, sep, arg = value.partition(':')
+  if os.path.exists(path) or not path.startswith('configs/'):
+    return value
+  packaged = os.path.join(configs_dir(), path[len('configs/'):])
+  return packaged + sep + arg if os.path.exists(packaged) else value
+
+
+def _resolve_config_args(argv: Sequence[str]) -> list[str]:
+  out, follows = [], False
+  for arg in argv:
+    if follows:   # the value of a `--config PATH` pair
+      arg, follows = resolve_config_path(arg), False
+    else:
+      for name in _CONFIG_FLAGS:
+        if arg.startswith(f'--{name}='):
+          arg = f'--{name}=' + resolve_config_path(arg[len(name) + 3:])
+        follows = follows or arg == f'--{name}'
+    out.append(arg)
+  return out
 
 
 def _one_line(text: str) -> str:
@@ -19,7 +55,7 @@ def parse_flags(argv: Sequence[str]) -> list[str]:
   """absl's flag parsing, with ml_collections' config errors made one line: an
   unknown `--config.a.b` key, a value of the wrong type, a missing config file."""
   try:
-    rest = flags.FLAGS(argv)
+    rest = flags.FLAGS(_resolve_config_args(argv))
     for name in flags.FLAGS:
       # ml_collections keeps a config file's load error until the config is first used.
       getattr(getattr(flags.FLAGS, name), 'keys', None)
@@ -52,7 +88,11 @@ def _exit(message: str) -> None:
 def define_config_file(name: str, default: str | None = None, help_string: str = '',
                        **kwargs):
   """`config_flags.DEFINE_config_file`, whose overrides of a default file are parsed
-  at definition: a bad `--NAME.key=value` there ends in one line too."""
+  at definition: a bad `--NAME.key=value` there ends in one line too. A default
+  'configs/x.py' is the project's own file wherever the command runs."""
+  _CONFIG_FLAGS.add(name)
+  if default is not None:
+    default = resolve_config_path(default)
   try:
     return config_flags.DEFINE_config_file(name, default, help_string, **kwargs)
   except (AttributeError, KeyError, TypeError, ValueError) as e:

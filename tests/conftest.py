@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from configs import cpu_small, synthetic
+from ssd_jax.configs import cpu_small, synthetic
+from ssd_jax.synthetic import dataset
 
 SHARED_DATA = Path(os.environ.get('SSD_JAX_SHARED_DATA',
                                   Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data'))
@@ -40,7 +41,6 @@ def tiny_synthetic_config(seed=0):
 def synthetic_root(tmp_path_factory):
   """A tiny synthetic data root (train/ of 2 scenes, test_kitti/, test_oxford/, clusters/ with
   24 pairs)."""
-  from ssd_jax.synthetic import dataset  # pylint: disable=g-import-not-at-top
   config = tiny_synthetic_config()
   config.clusters.num_pairs = 24
   config.train.num_scenes = 2     # clouds of another scene are the triplet negatives

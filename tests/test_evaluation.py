@@ -1,9 +1,9 @@
 """The paper's evaluations: FPR@95, precision curve, overlap mask, cluster reader and
-`experiments.reproduce` end to end on a tiny synthetic data root."""
+`experiments.evaluate` with the reproduce config end to end on a tiny synthetic data root."""
 
 import csv
-import json
 import dataclasses
+import json
 import os
 import subprocess
 import sys
@@ -12,10 +12,12 @@ import jax
 import numpy as np
 import pytest
 
-from ssd_jax import geometry, inference, train
+from ssd_jax import geometry, inference, pretrained, train
+from ssd_jax.configs import cpu_small
 from ssd_jax.data import benchmarks, clusters, io
 from ssd_jax.evaluation import (descriptor_matching, feature_store, fingerprint, learning_curve,
-                                precision, registration, repeatability)
+                                orientation, precision, registration, repeatability)
+from tests.conftest import tiny_config_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -111,7 +113,6 @@ def test_precision_of_perfect_and_random_descriptors():
 # ---- learned descriptors of many clusters at once -----------------------------------------
 
 def test_describe_clusters_equals_describe_per_cluster():
-  from configs import cpu_small  # pylint: disable=g-import-not-at-top
   config = cpu_small.get_config()
   config.model.num_samples = 16
   state = train.create_train_state(config, jax.random.key(0))
@@ -140,7 +141,6 @@ def test_describe_clusters_equals_describe_per_cluster():
 
 @pytest.fixture(scope='module')
 def tiny_checkpoint(synthetic_root, tmp_path_factory):
-  from tests.conftest import tiny_config_dict  # pylint: disable=g-import-not-at-top
   config = tiny_config_dict()
   config.data.path = str(synthetic_root / 'train')
   workdir = tmp_path_factory.mktemp('ckpt') / 'ours'
@@ -156,8 +156,8 @@ def _csv(path):
 def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path):
   out = tmp_path / 'out'
   run = subprocess.run(
-      [sys.executable, '-m', 'experiments.reproduce', f'--data_root={synthetic_root}',
-       f'--workdir={out}', '--config=configs/reproduce_small.py', '--config.max_pairs=2',
+      [sys.executable, '-m', 'experiments.evaluate', '--config=configs/reproduce_small.py',
+       f'--config.data_root={synthetic_root}', f'--workdir={out}', '--config.max_pairs=2',
        '--config.fpfh_max_nn=50', f'--config.checkpoints.ours={tiny_checkpoint}',
        f'--config.checkpoints.feat3dnet={tmp_path / "none"}',
        f'--config.checkpoints.ours_detector={tmp_path / "none"}'],
@@ -165,13 +165,13 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   assert run.returncode == 0, run.stderr[-3000:]
   report = (out / 'report.md').read_text()
   for heading in ('## Table I', '## Table II', '## Fig. 4: precision on oxford',
-                  '## Table III', '## Fig. 3', '## Skipped'):
+                  '## Table III', '## Figures 3, 5 and 6', '## Skipped'):
     assert heading in report, heading
   assert 'Ours: `' in report and '(step 4)' in report
   assert f'3DFeat-Net: `{tmp_path / "none"}` **missing**' in report
   assert '3DFeat-Net keypoints' in report and 'no such checkpoint directory' in report
-  for png in ('fig4_precision_oxford.png', 'descriptor_matching_roc.png', 'fig3_keypoints.png',
-              'registration_oxford_iss_ours.png'):
+  for png in ('fig4_precision_oxford.png', 'descriptor_matching_roc.png', 'figures_keypoints.png',
+              'figures_oxford_iss_ours.png'):
     assert (out / png).stat().st_size > 10_000, png
   assert '[1/8] Table I' in run.stderr and '[8/8] Figures' in run.stderr
 
@@ -179,7 +179,7 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   pairs = benchmarks.read_registration_set(synthetic_root / 'test_oxford')[:2]
   store = feature_store.FeatureStore({}, seed=0, fpfh_max_nn=50)
   res = registration.register_pairs(pairs, ['iss+fpfh'], store, progress=False)['iss+fpfh']
-  table = {r[0]: r for r in _csv(out / 'table_oxford.csv')}
+  table = {r[0]: r for r in _csv(out / 'table1_oxford.csv')}
   row = table['ISS kpt + FPFH desc']
   assert row[1] == '2' and float(row[5]) == pytest.approx(100 * np.mean([r['success'] for r in res]))
   assert float(row[6]) == pytest.approx(np.mean([r['trials'] for r in res]), abs=0.5)
@@ -197,7 +197,7 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   assert rep['3DFeat-Net'][1] == 'missing' and '## Keypoint repeatability on kitti' in report
 
   # Table III from the per-pair distances it saved, and the cluster labels on disk.
-  saved = np.load(out / 'distances.npz')
+  saved = np.load(out / 'descriptor_matching_distances.npz')
   labels = [p.label for p in clusters.read_cluster_pairs(synthetic_root / 'clusters')]
   np.testing.assert_array_equal(saved['labels'], labels)
   dm = {r[0]: r for r in _csv(out / 'descriptor_matching.csv')}
@@ -209,11 +209,25 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
 
 
 def test_reproduce_says_what_it_cannot_do(tmp_path):
-  run = subprocess.run([sys.executable, '-m', 'experiments.reproduce', f'--data_root={tmp_path}',
+  run = subprocess.run([sys.executable, '-m', 'experiments.evaluate',
+                        '--config=configs/reproduce.py', f'--config.data_root={tmp_path}',
                         f'--workdir={tmp_path / "out"}'], cwd=ROOT, capture_output=True,
                        text=True, timeout=300)
   assert run.returncode != 0 and 'Traceback' not in run.stderr
   assert 'nothing to evaluate under' in run.stderr and 'test_oxford' in run.stderr
+
+
+def test_evaluate_names_a_bad_type_and_missing_data(tmp_path):
+  common = [sys.executable, '-m', 'experiments.evaluate', '--config=configs/registration.py',
+            f'--workdir={tmp_path / "out"}']
+  run = subprocess.run(common + ['--config.evals.registration.type=tables'], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+  assert run.returncode != 0 and 'Traceback' not in run.stderr
+  assert 'evals.registration.type must be one of registration, precision' in run.stderr
+  run = subprocess.run(common + [f'--config.evals.registration.dataset={tmp_path / "nope"}'],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300)
+  assert run.returncode != 0 and 'Traceback' not in run.stderr
+  assert f'no registration set at {tmp_path / "nope"}' in run.stderr
 
 
 def test_plot_keypoints_cli(synthetic_root, tmp_path):
@@ -236,9 +250,11 @@ def test_descriptor_matching_cli_names_a_truncated_cluster(tmp_path):
   good.tofile(tmp_path / '0_0.bin')
   (tmp_path / '0_1.bin').write_bytes(good.tobytes()[:-5])
   (tmp_path / 'filenames.txt').write_text('pair label\n0 1\n')
-  run = subprocess.run([sys.executable, '-m', 'experiments.descriptor_matching',
-                        f'--workdir={tmp_path / "out"}', f'--config.clusters={tmp_path}',
-                        "--config.descriptors=('fpfh',)"], cwd=ROOT, capture_output=True,
+  run = subprocess.run([sys.executable, '-m', 'experiments.evaluate',
+                        '--config=configs/descriptor_matching.py', f'--workdir={tmp_path / "out"}',
+                        f'--config.evals.descriptor_matching.clusters={tmp_path}',
+                        "--config.evals.descriptor_matching.descriptors=('fpfh',)"],
+                       cwd=ROOT, capture_output=True,
                        text=True, timeout=300)
   assert run.returncode != 0 and 'Traceback' not in run.stderr
   assert '0_1.bin' in run.stderr and 'truncated' in run.stderr
@@ -293,8 +309,6 @@ def test_learning_curve_rows_resume_and_cli(synthetic_root, tiny_checkpoint, tmp
 
 
 def test_rotation_sweep_separates_equivariant_and_paper_heads(tiny_checkpoint, tmp_path):
-  from ssd_jax import pretrained  # pylint: disable=g-import-not-at-top
-  from ssd_jax.evaluation import orientation  # pylint: disable=g-import-not-at-top
   rng = np.random.default_rng(0)
   points = (rng.uniform(-10, 10, (3000, 3)) * np.array([1, 1, 0.2])).astype(np.float32)
   centers = points[:64]

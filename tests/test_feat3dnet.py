@@ -11,9 +11,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy import spatial
 
-from ssd_jax import geometry, inference, objective, train
-from ssd_jax.data import clean, datasets
+from ssd_jax import augment, geometry, inference, objective, train
+from ssd_jax.data import clean, datasets, io, kitti
 from ssd_jax.evaluation import orientation, repeatability, triplets
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -61,7 +62,6 @@ def test_attention_weighted_triplet_by_hand():
 
 def test_triplet_dataset_draws_valid_triplets(synthetic_root):
   data = datasets.TripletDataset(synthetic_root / 'train')
-  from ssd_jax.data import io  # pylint: disable=g-import-not-at-top
   entries = io.read_oxford_index(synthetic_root / 'train' / 'train.txt')
   for a in data.anchors:
     assert set(data.positives[a]) == set(entries[a].positives)
@@ -96,8 +96,6 @@ def test_self_positives_control(synthetic_root):
 def test_triplet_clouds_share_their_scene_axes(synthetic_root):
   """Anchor and positive, rotated into scene axes, differ by their sensors' offset
   only; as stored (sensor frames) they also differ by the heading change."""
-  from scipy import spatial  # pylint: disable=g-import-not-at-top
-  from ssd_jax.data import kitti  # pylint: disable=g-import-not-at-top
   scene = datasets.TripletDataset(synthetic_root / 'train', crop_radius=0)
   stored = datasets.TripletDataset(synthetic_root / 'train', axes='stored', crop_radius=0)
   position = lambda f: kitti.read_poses(f.parent / 'poses.txt')[int(f.stem), :3, 3]
@@ -300,7 +298,6 @@ def test_orientation_errors_of_a_detector(tiny_config):
 def test_reference_augmentations_act_per_cloud():
   """RotateSmall, Shift and Rotate1D: one rigid motion per cloud, within the reference's
   bounds, different between the clouds of a batch."""
-  from ssd_jax import augment  # pylint: disable=g-import-not-at-top
   pts = jnp.asarray(np.random.default_rng(0).uniform(-10, 10, (4, 200, 3)), jnp.float32)
   key = jax.random.key(3)
 

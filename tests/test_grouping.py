@@ -2,7 +2,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ssd_jax import grouping
+from ssd_jax import geometry, grouping
 
 
 def ball_query_reference(points, centers, radius, c, valid):
@@ -97,7 +97,6 @@ def test_sample_centers_batch_shapes_and_modes():
 def test_rotate_clusters_undoes_orientation():
   grouped = jnp.asarray(_cloud(6, 40).reshape(2, 4, 5, 3))
   angles = jnp.asarray(np.random.default_rng(0).uniform(-3, 3, (2, 4)), jnp.float32)
-  from ssd_jax import geometry
   turned = jnp.einsum('bkci,bkji->bkcj', grouped, geometry.rotation_z(angles))
   np.testing.assert_allclose(grouping.rotate_clusters(turned, angles), grouped, atol=1e-5)
 

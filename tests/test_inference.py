@@ -1,16 +1,17 @@
 """Inference API: both neighbourhood paths agree, size buckets, NMS, checkpoints."""
 
+import dataclasses
+
 import jax
 import numpy as np
 import pytest
 
-from configs import cpu_small
 from ssd_jax import grouping, inference, network, train
+from ssd_jax.configs import cpu_small
 
 
 @pytest.fixture(scope='module')
 def model():
-  from configs import cpu_small  # pylint: disable=g-import-not-at-top
   config = cpu_small.get_config()
   config.model.num_samples = 16
   state = train.create_train_state(config, jax.random.key(0))
@@ -113,7 +114,6 @@ def test_load_restores_a_training_run(tiny_config, tmp_path):
 
 
 def test_descriptors_averaged_over_draws(model):
-  import dataclasses  # pylint: disable=g-import-not-at-top
   rng = np.random.default_rng(7)
   pts = _cloud(rng, 4000)
   kp = pts[:40]

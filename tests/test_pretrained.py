@@ -4,18 +4,19 @@ import os
 import subprocess
 import sys
 
+import ml_collections
 import numpy as np
 import pytest
 
-from ssd_jax import inference, pretrained, train
+from ssd_jax import checkpoint, inference, pretrained, train
 from ssd_jax.data import io
+from tests.conftest import tiny_config_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 @pytest.fixture(scope='module')
 def tiny_run(tmp_path_factory):
-  from tests.conftest import tiny_config_dict  # pylint: disable=g-import-not-at-top
   config = tiny_config_dict()
   config.model.orientation_head = 'equivariant'
   folder = tmp_path_factory.mktemp('clouds')
@@ -65,8 +66,6 @@ def test_damaged_exports_are_named(tiny_run, tmp_path):
 
 
 def _config_of(run):
-  from ssd_jax import checkpoint  # pylint: disable=g-import-not-at-top
-  import ml_collections  # pylint: disable=g-import-not-at-top
   ckpt = checkpoint.Checkpointer(inference.checkpoint_directory(run), asynchronous=False)
   config = ml_collections.ConfigDict(ckpt.restore_config())
   ckpt.close()

@@ -6,10 +6,13 @@ import subprocess
 import sys
 
 import numpy as np
+import open3d as o3d
 import pytest
 
 from ssd_jax import geometry
 from ssd_jax.data import benchmarks, io
+from ssd_jax.registration import metrics
+from tests.conftest import shared_path
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -84,8 +87,9 @@ def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
 
 
 def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):
-  out = _run('experiments.evaluate_registration', f'--workdir={tmp_path}',
-             f'--config.dataset={tiny_set / "test_kitti"}', '--config.max_pairs=3',
+  out = _run('experiments.evaluate', f'--workdir={tmp_path}',
+             f'--config.evals.registration.dataset={tiny_set / "test_kitti"}',
+             '--config.max_pairs=3',
              "--config.rows=('iss+fpfh','iss+ours')", f'--config.checkpoints.ours={tmp_path / "x"}',
              '--config.fpfh_max_nn=200')
   assert out.returncode == 0, out.stderr[-3000:]
@@ -104,7 +108,6 @@ def test_register_cli_on_real_pairs(names, descriptor, tmp_path):
   """The real pairs have no ground truth: the RANSAC pose must be a success (RTE < 2 m,
   RRE < 5°) against the ICP-refined pose, and most points of cloud 2 must land on cloud 1.
   The learned rows use the shipped model."""
-  from tests.conftest import shared_path  # pylint: disable=g-import-not-at-top
   c1, c2 = (shared_path('example', f'{n}.bin') for n in names)
   common = [f'--cloud1={c1}', f'--cloud2={c2}', f'--descriptor={descriptor}', '--fpfh_max_nn=200']
   out = _run('experiments.register', *common, f'--json={tmp_path / "ransac.json"}')
@@ -113,7 +116,6 @@ def test_register_cli_on_real_pairs(names, descriptor, tmp_path):
   assert out.returncode == 0, out.stderr[-3000:]
   ransac_t = np.array(json.loads((tmp_path / 'ransac.json').read_text())['T_12'])
   icp = json.loads((tmp_path / 'icp.json').read_text())
-  from ssd_jax.registration import metrics  # pylint: disable=g-import-not-at-top
   err = metrics.registration_errors(np.array(icp['T_12']), ransac_t)
   assert icp['icp_fitness'] > 0.8 and icp['overlap_fitness'] > 0.7
   assert err['success'] and err['rte'] < 1.0, err
@@ -149,7 +151,6 @@ def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set
     if name.endswith('.npy'):
       np.save(path, data)
     elif name.endswith('.ply'):
-      import open3d as o3d  # pylint: disable=g-import-not-at-top
       o3d.io.write_point_cloud(str(path), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(data)))
     elif isinstance(data, bytes):
       path.write_bytes(data)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from ssd_jax import geometry
-from ssd_jax.data import benchmarks, groundtruth, io
-from ssd_jax.registration import metrics, pipeline, ransac
+from ssd_jax.data import benchmarks, clean, groundtruth, io
+from ssd_jax.registration import features, metrics, pipeline, ransac
 from ssd_jax.synthetic import trajectory
 
 
@@ -128,7 +128,6 @@ def test_fpfh_follows_the_keypoint_order():
   """Open3D returns features in ascending index order; learned keypoints come strongest
   first, so the wrapper must map them back (a bug that once zeroed the learned-keypoint
   + FPFH rows)."""
-  from ssd_jax.registration import features  # pylint: disable=g-import-not-at-top
   pts = np.random.default_rng(0).normal(size=(2000, 3)) * 5
   idx = np.array([500, 3, 1200, 7, 3])
   ordered = features.fpfh(pts, idx, radius=2.0)
@@ -164,7 +163,6 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
 
 
 def test_pipeline_refuses_bad_clouds_with_one_line():
-  from ssd_jax.data import clean  # pylint: disable=g-import-not-at-top
   pts = np.random.default_rng(0).normal(size=(500, 3)) * 5
   with_nan = pts.copy()
   with_nan[3] = np.nan

@@ -1,6 +1,7 @@
 """Synthetic data: determinism, exact ground truth, layouts, realism helpers, baseline."""
 
 import filecmp
+import json
 import os
 import shutil
 import subprocess
@@ -196,7 +197,6 @@ def test_reuse_and_config_errors(tiny_set, tmp_path):
     dataset.generate(tiny_config(seed=3), tiny_set)
   # A dataset written before a config key existed is reused while the key keeps the value
   # it implied, and refused when the config asks for another.
-  import json  # pylint: disable=g-import-not-at-top
   old = tmp_path / 'old'
   shutil.copytree(tiny_set, old)
   manifest = json.loads((old / 'synthetic.json').read_text())

@@ -1,4 +1,4 @@
-"""Writers shared by the evaluation entry points and `experiments.reproduce`: each
+"""Writers of the evaluators (evaluators.py): each
 takes an evaluation's results, writes its Markdown, CSV and figure into a folder
 and returns the Markdown (figures linked relative to that folder)."""
 

@@ -1,0 +1,49 @@
+r"""Run the evaluations a config names (`config.evals`) and write their report.
+
+    python -m experiments.evaluate --config=configs/registration.py --workdir=runs/reg
+    python -m experiments.evaluate --config=configs/reproduce.py \
+        --config.data_root=DIR --workdir=OUT
+
+configs/registration.py (Tables I / II), precision.py (Fig. 4), repeatability.py,
+descriptor_matching.py (Table III) name one evaluation each; reproduce.py names every
+table and figure of the paper (ssd_jax/evaluation/evaluators.py describes the types).
+Writes each evaluation's tables and figures into WORKDIR under its name, and
+WORKDIR/report.md.
+"""
+
+import shlex
+import sys
+
+from absl import app
+from absl import flags
+
+from ssd_jax import cli
+from ssd_jax.evaluation import evaluators
+from ssd_jax.logging_utils import quiet_libraries
+
+FLAGS = flags.FLAGS
+flags.DEFINE_string('workdir', None, 'Output directory.')
+cli.define_config_file('config', 'configs/registration.py', 'Evaluation config.')
+flags.mark_flags_as_required(['workdir'])
+
+
+def main(argv):
+  if len(argv) > 1:
+    raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
+  quiet_libraries()
+  command = 'python -m experiments.evaluate ' + shlex.join(sys.argv[1:])
+  try:   # bad rows or types, missing, truncated or degenerate data: one line, no traceback
+    path, text = evaluators.evaluate(FLAGS.config, FLAGS.workdir, command)
+  except ValueError as e:
+    raise SystemExit(f'error: {e}') from None
+  print(text)
+  print(f'\nwrote {path}')
+
+
+def console():
+  """The `ssd-jax-evaluate` command (pyproject.toml)."""
+  cli.run(main)
+
+
+if __name__ == '__main__':
+  console()

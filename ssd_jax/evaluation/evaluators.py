@@ -1,0 +1,291 @@
+"""Named evaluators and the one loop that runs the evaluations a config lists.
+
+A config names its evaluations under `config.evals` (big_vision's pattern), each a
+section `{type: <evaluator>, <its settings>}`:
+
+    registration         Tables I / II: keypoints -> descriptors -> NN matches -> RANSAC
+    precision            Fig. 4: descriptor nearest neighbours within x of the truth
+    repeatability        keypoints found again within a radius after the true alignment
+    descriptor_matching  Table III: FPR at 95 % recall on cluster pairs
+    figures              Fig. 3 (keypoints) and Figs. 5-6 (registration examples)
+
+Settings shared by all (checkpoints, keypoint x descriptor rows, RANSAC, seeds) sit at
+the top of the config (configs/evaluation.py). Data paths are tried in order, relative
+to `config.data_root`; an evaluation whose data is not there is skipped and the report
+says why. `evaluate` runs them, in the order of `TYPES`, then by name, writes each one's
+tables and figures into the workdir under its name, and OUT/report.md holding them all
+with the checkpoints, what was skipped, a hash per stage, the time per stage and the
+config.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Callable, Sequence
+
+import ml_collections
+
+from ssd_jax import viz
+from ssd_jax.data import benchmarks, clusters, io
+from ssd_jax.evaluation import (descriptor_matching, feature_store, fingerprint, precision,
+                                registration, repeatability, report)
+from ssd_jax.registration import pipeline
+
+REPRODUCIBILITY = (
+    'The same command on the same machine writes the same numbers (every stage is '
+    'seeded). Across machines, a short hash of each stage\'s output below tells where two '
+    'reports part: the first differing row is the stage to look at. The generated data, '
+    'ISS keypoints and FPFH do not depend on the thread count or the CPU\'s vector '
+    'instructions; the learned descriptors and RANSAC fits do not either between AVX2 and '
+    'AVX-512, but differ in their last bits on a CPU without AVX, and training there gives '
+    'other weights and other "this run" rows: docs/reproduce.md gives the measured spread.')
+
+
+class Unavailable(Exception):
+  """The data an evaluation needs is not under the data root: skip it, say why."""
+
+
+@dataclasses.dataclass
+class Section:
+  title: str
+  text: str
+  skipped: list[str] = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
+class Context:
+  """What every evaluator gets besides its own settings `ev`."""
+  config: ml_collections.ConfigDict     # the whole config (shared settings at the top)
+  store: feature_store.FeatureStore
+  missing: dict[str, str]               # checkpoint name -> why it is not loaded
+  workdir: Path
+  data_root: Path
+
+  def find(self, candidates, read: Callable, what: str):
+    """The first of `candidates` (a path or a tuple of them, relative to the data root)
+    that exists -> (path, read(path)); Unavailable naming every path tried otherwise."""
+    tried, reasons = [], []
+    for c in (candidates,) if isinstance(candidates, str) else tuple(candidates):
+      path = self.data_root / c
+      tried.append(str(path))
+      if not path.exists():
+        continue
+      try:
+        return path, read(path)
+      except io.CloudFileError as e:
+        reasons.append(f'{path} is not a usable {what} ({e})')
+    if reasons:
+      raise Unavailable('; '.join(reasons))
+    raise Unavailable(f'no {what} at {", ".join(tried)}')
+
+  def pairs(self, candidates):
+    path, pairs = self.find(candidates, benchmarks.read_registration_set, 'registration set')
+    max_pairs = self.config.max_pairs
+    pairs = pairs[:max_pairs] if max_pairs else pairs
+    return pairs, f'{path} ({len(pairs)} pairs)'
+
+
+def _registration(name, ev, ctx: Context) -> Section:
+  pairs, description = ctx.pairs(ev.dataset)
+  cfg, rows = ctx.config, list(ctx.config.rows)
+  with open(ctx.workdir / f'{name}_pairs.jsonl', 'w') as log:
+    results = registration.register_pairs(
+        pairs, feature_store.runnable_rows(rows, ctx.missing), ctx.store, seed=cfg.seed,
+        inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
+        max_trials=cfg.max_trials, log=log, desc=name)
+  return Section(ev.title, report.registration_outputs(
+      results, rows, ctx.missing, str(ctx.workdir), ev.paper, description, name))
+
+
+def _precision(name, ev, ctx: Context) -> Section:
+  pairs, description = ctx.pairs(ev.dataset)
+  rows = list(ctx.config.rows)
+  results = precision.evaluate_precision(pairs, feature_store.runnable_rows(rows, ctx.missing),
+                                         ctx.store, overlap_radius=ev.overlap_radius, desc=name)
+  return Section(ev.title, report.precision_outputs(
+      results, rows, ctx.missing, str(ctx.workdir), ev.read_at, description, name))
+
+
+def _repeatability(name, ev, ctx: Context) -> Section:
+  pairs, description = ctx.pairs(ev.dataset)
+  sources = [s for s in ev.keypoint_sources if s not in ctx.missing]
+  results = repeatability.evaluate_repeatability(pairs, sources, ctx.store, ev.radius)
+  return Section(ev.title, report.repeatability_outputs(
+      results, list(ev.keypoint_sources), ctx.missing, str(ctx.workdir), description,
+      ev.radius, name))
+
+
+def _descriptor_matching(name, ev, ctx: Context) -> Section:
+  folder, pairs = ctx.find(ev.clusters, clusters.read_cluster_pairs, 'cluster set')
+  pairs = pairs[:ev.max_pairs] if ev.max_pairs else pairs
+  names = [n for n in ev.descriptors if n not in ctx.missing]
+  descriptors = {n: (None if n in feature_store.BUILTIN_DESCRIPTORS else ctx.store.models[n])
+                 for n in names}
+  distances, iss_distance = descriptor_matching.describe_pairs(
+      pairs, descriptors, radius=ev.radius, fpfh_max_nn=ctx.config.fpfh_max_nn)
+  labels = [p.label for p in pairs]
+  descriptor_matching.save_distances(str(ctx.workdir / f'{name}_distances.npz'), labels,
+                                     distances, iss_distance)
+  missing = {n: ctx.missing[n] for n in ev.descriptors if n in ctx.missing}
+  return Section(ev.title, report.descriptor_matching_outputs(
+      distances, labels, iss_distance, tuple(ev.r_th), missing, str(ctx.workdir),
+      f'{folder} ({len(pairs)} pairs)', recall=ev.recall, name=name))
+
+
+def _figures(name, ev, ctx: Context) -> Section:
+  """Fig. 3 on the first cloud of the first set found; Figs. 5-6 on each set's first pair."""
+  found, skipped = {}, []
+  for set_name, candidates in ev.sets.items():
+    try:
+      found[set_name] = ctx.pairs(candidates)[0]
+    except Unavailable as e:
+      skipped.append(f'{ev.title} ({set_name}): {e}')
+  if not found:
+    raise Unavailable('; '.join(skipped))
+  parts = [_keypoint_figure(name, ev, ctx, next(iter(found.values()))[0].cloud1, skipped)]
+  for set_name, pairs in found.items():
+    parts += _registration_figures(name, ev, ctx, set_name, pairs[0], skipped)
+  return Section(ev.title, '\n'.join(parts), skipped)
+
+
+def _keypoint_figure(name, ev, ctx: Context, cloud_path, skipped: list[str]) -> str:
+  points, shown = ctx.store.cloud(cloud_path), {}
+  for source in ev.keypoint_sources:
+    label = feature_store.NAMES.get(source, source)
+    if source in ctx.missing:
+      skipped.append(f'Fig. 3 {label} keypoints: {ctx.missing[source]}')
+      continue
+    shown[f'{label} keypoints'] = points[ctx.store.keypoints(cloud_path, source)]
+  file = f'{name}_keypoints.png'
+  viz.plot_keypoints(points, shown, ctx.workdir / file)
+  return f'Keypoints on {cloud_path} (top view, red dots).\n\n![keypoints]({file})\n'
+
+
+def _registration_figures(name, ev, ctx: Context, set_name, pair, skipped) -> list[str]:
+  cfg, parts = ctx.config, []
+  for row in ev.registration_rows:
+    label = feature_store.row_label(row)
+    if set(feature_store.split_row(row)) & set(ctx.missing):
+      skipped.append(f'{set_name} registration figure {label}: '
+                     f'{feature_store.missing_reason(row, ctx.missing)}')
+      continue
+    f1, f2 = ctx.store.features(pair.cloud1, row), ctx.store.features(pair.cloud2, row)
+    reg = pipeline.estimate(f1, f2, seed=cfg.seed * 1_000_003,
+                            inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
+                            max_trials=cfg.max_trials)
+    file = f'{name}_{set_name}_{row.replace("+", "_")}.png'
+    viz.plot_registration(ctx.store.cloud(pair.cloud1), ctx.store.cloud(pair.cloud2), f1.xyz,
+                          f2.xyz[reg.matches[:, 1]], reg.inliers, ctx.workdir / file,
+                          title=f'{label}: {int(reg.inliers.sum())} inliers of '
+                                f'{len(reg.inliers)} matches')
+    parts.append(f'{set_name}, {label}, pair {pair.idx1}/{pair.idx2} ({pair.sequence}):\n\n'
+                 f'![{row}]({file})\n')
+  return parts
+
+
+EVALUATORS: dict[str, Callable[[str, ml_collections.ConfigDict, Context], Section]] = {
+    'registration': _registration,
+    'precision': _precision,
+    'repeatability': _repeatability,
+    'descriptor_matching': _descriptor_matching,
+    'figures': _figures,
+}
+TYPES = tuple(EVALUATORS)
+
+
+def ordered_evals(config: ml_collections.ConfigDict) -> list[tuple[str, ml_collections.ConfigDict]]:
+  """config.evals as [(name, section)] in run order; an unknown type is a clear error."""
+  evals = list(config.evals.items())
+  if not evals:
+    raise ValueError('config.evals is empty: name at least one evaluation')
+  for name, ev in evals:
+    if ev.get('type') not in EVALUATORS:
+      raise ValueError(f'evals.{name}.type must be one of {", ".join(TYPES)}, '
+                       f'got {ev.get("type")!r}')
+  return sorted(evals, key=lambda e: (TYPES.index(e[1].type), e[0]))
+
+
+def rows_needed(config: ml_collections.ConfigDict) -> list[str]:
+  """Every keypoint x descriptor row the evaluations use (for loading checkpoints)."""
+  rows = []
+  for _, ev in ordered_evals(config):
+    if ev.type in ('registration', 'precision'):
+      rows += list(config.rows)
+    elif ev.type == 'repeatability':
+      rows += [f'{s}+fpfh' for s in ev.keypoint_sources]
+    elif ev.type == 'descriptor_matching':
+      rows += [f'iss+{d}' for d in ev.descriptors]
+    else:
+      rows += list(ev.registration_rows) + [f'{s}+fpfh' for s in ev.keypoint_sources]
+  return list(dict.fromkeys(rows))
+
+
+def evaluate(config: ml_collections.ConfigDict, workdir: str | os.PathLike,
+             command: str = '', log: Callable[[str], None] | None = None) -> tuple[Path, str]:
+  """Run every evaluation of config.evals whose data exists.
+
+  Writes each one's outputs and report.md into `workdir`; `command` is quoted in the
+  report. Returns (report path, the Markdown of the evaluations that ran). Raises
+  ValueError when none could run (the message says why for each) or on bad input.
+  """
+  log = log or (lambda s: print(s, file=sys.stderr, flush=True))
+  evals = ordered_evals(config)
+  models, missing = feature_store.load_models(config.checkpoints,
+                                              feature_store.model_names(rows_needed(config)))
+  store = feature_store.FeatureStore(models, config.seed, config.fpfh_max_nn)
+  workdir = Path(workdir)
+  workdir.mkdir(parents=True, exist_ok=True)
+  ctx = Context(config, store, missing, workdir, Path(config.data_root or '.'))
+  sections, skipped, seconds, ran = [], [], {}, []
+  for n, (name, ev) in enumerate(evals, 1):
+    log(f'[{n}/{len(evals)}] {ev.title}')
+    t0 = time.perf_counter()
+    try:
+      section = EVALUATORS[ev.type](name, ev, ctx)
+    except Unavailable as e:
+      skipped.append(f'{ev.title}: {e}')
+      continue
+    seconds[ev.title] = time.perf_counter() - t0
+    sections.append(section)
+    ran.append((name, ev.type))
+    skipped += section.skipped
+  if not sections:
+    raise ValueError(f'nothing to evaluate under {ctx.data_root}: ' + '; '.join(skipped))
+  path = workdir / 'report.md'
+  path.write_text(_report(config, ctx, sections, skipped, seconds,
+                          [name for name, kind in ran if kind == 'registration'], command))
+  return path, '\n\n'.join(f'## {s.title}\n\n{s.text.strip()}' for s in sections)
+
+
+def _report(config, ctx: Context, sections: Sequence[Section], skipped: Sequence[str],
+            seconds: dict, registration_names: Sequence[str], command: str) -> str:
+  lines = ['# ssd_jax: evaluation report', '',
+           f'Generated {datetime.datetime.now().isoformat(timespec="seconds")} by',
+           f'`{command or "ssd_jax.evaluation.evaluators.evaluate"}`',
+           'with the config below. Every number here was computed by this run; the paper\'s '
+           'numbers are shown beside for comparison.', '', '## Checkpoints', '']
+  for name, path in sorted(config.checkpoints.items()):
+    model = ctx.store.models.get(name)
+    lines.append(f'- {feature_store.NAMES.get(name, name)}: `{path}` ' +
+                 (f'(step {model.step})' if model is not None else
+                  f'**missing**: {ctx.missing.get(name, "not used by any row")}'))
+  lines += ['', '## Skipped', '']
+  lines += [f'- {s}' for s in skipped] or ['- nothing']
+  for s in sections:
+    lines += ['', f'## {s.title}', '', s.text.strip()]
+  stages = ctx.store.fingerprints()
+  for name in registration_names:
+    digests = fingerprint.registration_digests(ctx.workdir / f'{name}_pairs.jsonl')
+    stages.update({f'registration: {name}, {row}': d for row, d in digests.items()})
+  lines += ['', '## Reproducibility', '', REPRODUCIBILITY, '',
+            fingerprint.markdown(stages, fingerprint.environment())]
+  lines += ['', '## Time', '', '| stage | s |', '|---|---|']
+  lines += [f'| {k} | {v:.1f} |' for k, v in seconds.items()]
+  lines += [f'| (within these) {k} | {v:.1f} |' for k, v in sorted(ctx.store.seconds.items())]
+  lines += ['', '## Config', '', '```', str(config).strip(), '```', '']
+  return '\n'.join(lines)
