@@ -14,7 +14,7 @@ from scipy import spatial
 from ssd_jax import geometry
 from ssd_jax.data import datasets, groundtruth, io
 from ssd_jax.synthetic import dataset, lidar, realism, scene as scene_lib
-from tests.conftest import tiny_synthetic_config as tiny_config
+from tests.conftest import shared_path, tiny_synthetic_config as tiny_config
 
 
 @pytest.fixture(scope='module')
@@ -265,3 +265,18 @@ def test_realism_statistics_on_constructed_scene():
   np.testing.assert_allclose(hist, [0.25, 0.25, 0, 0.25, 0, 0.25])
   front = realism.front_fov(np.array([[10.0, 0, 0], [-10.0, 0, 0], [10, 10, 0], [10, 0, -5]]))
   np.testing.assert_allclose(front, [[10.0, 0, 0]])
+
+
+def test_realism_table_puts_synthetic_and_real_scans_side_by_side(synthetic_root):
+  real = shared_path()
+  md, stats = realism.compare_with_real(str(synthetic_root), str(real), stride=2)
+  written = sorted((synthetic_root / 'test_kitti' / '00').glob('*.bin'))
+  assert stats['synthetic processed (0.2 m voxels)']['scans'] == len(written[::2])
+  assert stats['synthetic raw (front crop)']['scans'] == len(written[::2])
+  assert stats['real KITTI raw (front crop)']['scans'] == len(
+      list((real / 'kitti_object_velodyne').glob('*.bin')))
+  # Each processed scan is counted as written: the mean of the files' point counts.
+  counts = [len(io.read_cloud(f)) for f in written[::2]]
+  assert stats['synthetic processed (0.2 m voxels)']['points per scan'] == pytest.approx(
+      np.mean(counts))
+  assert len(md.splitlines()) == 2 + len(stats['synthetic raw (front crop)'])

@@ -7,8 +7,15 @@ eigenvalue) distributions in 1 m neighbourhoods.
 
 from __future__ import annotations
 
+import glob
+import os
+
+import ml_collections
 import numpy as np
 from scipy import spatial
+
+from ssd_jax.data import io
+from ssd_jax.synthetic import dataset
 
 RANGE_BINS = (0.0, 5.0, 10.0, 20.0, 40.0, 80.0, np.inf)
 # KITTI's object-benchmark scans keep what the front camera sees: azimuth within
@@ -86,3 +93,29 @@ def scan_statistics(scans: list[np.ndarray], seed: int = 0) -> dict[str, float]:
   stats['share linear (> 0.5)'] = float(np.mean(shape['linearity'] > 0.5))
   stats['scattering median'] = float(np.median(shape['scattering']))
   return stats
+
+
+def compare_with_real(data: str, real: str, stride: int) -> tuple[str, dict]:
+  """`scan_statistics` of every `stride`-th KITTI-style test scan of the synthetic set in
+  `data` (raw, front-camera crop, and as written) beside the real KITTI scans under `real`
+  (kitti_object_velodyne/ raw, example/kitti_* processed) -> (Markdown table, stats)."""
+  config = ml_collections.ConfigDict(dataset.read_manifest(data)['config'])
+  raw, processed = [], []
+  for seq in range(config.test_kitti.num_scenes):
+    drive = dataset.make_drive(config, 'test_kitti', seq)
+    for k in range(0, len(drive.poses), stride):
+      raw.append(front_fov(drive.scan(k)))
+      processed.append(io.read_cloud(os.path.join(data, 'test_kitti', f'{seq:02d}', f'{k:06d}.bin')))
+  real_raw = [io.read_cloud(f) for f in sorted(glob.glob(f'{real}/kitti_object_velodyne/*.bin'))]
+  real_proc = [io.read_cloud(f) for f in sorted(glob.glob(f'{real}/example/kitti_*.bin'))]
+  cols = {'real KITTI raw (front crop)': real_raw, 'synthetic raw (front crop)': raw,
+          'real KITTI processed (0.2 m voxels)': real_proc,
+          'synthetic processed (0.2 m voxels)': processed}
+  stats = {name: scan_statistics(scans) if scans else None for name, scans in cols.items()}
+  keys = next(s for s in stats.values() if s)
+  lines = ['| statistic | ' + ' | '.join(cols) + ' |', '|---' * (len(cols) + 1) + '|']
+  for key in keys:
+    cells = ['n/a' if s is None else (f'{s[key]:,.0f}' if key in ('scans', 'points per scan')
+                                      else f'{s[key]:.3f}') for s in stats.values()]
+    lines.append(f'| {key} | ' + ' | '.join(cells) + ' |')
+  return '\n'.join(lines), stats
