@@ -75,6 +75,7 @@ def get_config() -> ml_collections.ConfigDict:
   config.train = train = ml_collections.ConfigDict()
   train.batch_size = 6
   train.learning_rate = 1e-3
+  train.lr_schedule = 'constant'   # constant (paper) | cosine (decays to 0 at num_steps)
   train.num_steps = 72_500
   train.log_every = 50
   train.eval_every = 500

@@ -103,13 +103,35 @@ def test_config_errors_name_the_value(tiny_config):
            ('model.orientation_head', 'pca', 'orientation_head must be one of'),
            ('model.branch_dropout', 1.0, r'branch_dropout must be in \[0, 0.9\]'),
            ('model.branch_crop_shift', -1.0, 'branch_crop_shift must be >= 0'),
-           ('model.branch_crop_radius', 0.0, 'branch_crop_radius must be > 0')]
+           ('model.branch_crop_radius', 0.0, 'branch_crop_radius must be > 0'),
+           ('train.lr_schedule', 'step', "lr_schedule must be one of .*'step'")]
   for field, value, message in cases:
     config = tiny_config.copy_and_resolve_references()
     section, name = field.split('.')
     config[section][name] = value
     with pytest.raises(train.ConfigError, match=message):
       train.check_config(config)
+
+
+def test_cosine_schedule_decays_the_step_to_zero_at_num_steps(tiny_config):
+  """The same gradient every step: constant Adam moves the weights by the learning rate
+  each step; cosine by lr * (1 + cos(pi t / T)) / 2, ~0 at the end."""
+  tiny_config.train.num_steps, tiny_config.train.learning_rate = 10, 0.1
+  params = {'w': jnp.zeros(3)}
+  grads = {'w': jnp.ones(3)}
+  steps = {}
+  for schedule in ('constant', 'cosine'):
+    tiny_config.train.lr_schedule = schedule
+    opt = train.create_optimizer(tiny_config)
+    state, sizes = opt.init(params), []
+    for _ in range(10):
+      updates, state = opt.update(grads, state, params)
+      sizes.append(float(jnp.abs(updates['w'][0])))
+    steps[schedule] = np.array(sizes)
+  np.testing.assert_allclose(steps['constant'], 0.1, rtol=1e-4)
+  t = np.arange(10)
+  np.testing.assert_allclose(steps['cosine'], 0.05 * (1 + np.cos(np.pi * t / 10)), rtol=1e-3)
+  assert steps['cosine'][-1] < 0.003
 
 
 def _read_metrics(workdir):
