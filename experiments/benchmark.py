@@ -136,7 +136,8 @@ def time_parts(config) -> dict:
 
 
 def main(argv):
-  del argv
+  if len(argv) > 1:
+    raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   if FLAGS.child:
     print('RESULT ' + json.dumps(bench_config(FLAGS.child, FLAGS.steps,
                                                FLAGS.breakdown and FLAGS.child == 'paper')))

@@ -17,7 +17,7 @@ from absl import flags
 from absl import logging
 import jax
 
-from ssd_jax import checkpoint, train
+from ssd_jax import checkpoint, config_checks, train
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.data import clean, io
 
@@ -40,7 +40,7 @@ def main(argv):
       hint = ('\nthe synthetic set is made by: python -m experiments.make_synthetic '
               '--config=configs/synthetic_small.py --out=data_cache/synthetic_small')
     raise SystemExit(f'error: {e}{hint}') from None
-  except (train.ConfigError, clean.CloudDataError, train.TrainingDiverged,
+  except (config_checks.ConfigError, clean.CloudDataError, train.TrainingDiverged,
           checkpoint.CheckpointError) as e:
     raise SystemExit(f'error: {e}') from None
 

@@ -17,7 +17,7 @@ from absl import flags
 import jax
 import numpy as np
 
-from ssd_jax import cli, inference, train
+from ssd_jax import cli, config_checks, inference, train
 from ssd_jax.evaluation import orientation, triplets
 from ssd_jax.logging_utils import quiet_libraries
 
@@ -39,7 +39,7 @@ def main(argv):
   quiet_libraries()
   config = FLAGS.config
   try:   # a missing checkpoint or train.txt, bad clouds: one line, no traceback
-    train.check_config(config)
+    config_checks.check_config(config)
     probe = train.probe_triplets(train.triplet_dataset(config), config)
     trained = inference.load(FLAGS.workdir)
     fresh = jax.device_get(train.create_train_state(config, jax.random.key(config.seed)))

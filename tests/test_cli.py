@@ -72,7 +72,7 @@ def test_cli_mistakes_end_in_one_line(tmp_path):
       (['--config=configs/cpu_small.py', '--config.train.num_steps=abc'],
        "flag --config.train.num_steps=abc: invalid literal for int()"),
       (['--config=configs/no_such.py'], "configs/no_such.py [Errno 2] No such file"),
-      ([f'--config=configs/cpu_small.py', f'--workdir={tmp_path / "a_file"}', data],
+      (['--config=configs/cpu_small.py', f'--workdir={tmp_path / "a_file"}', data],
        'cannot create it as a folder (File exists)'),
   ]
   for args, message in cases:

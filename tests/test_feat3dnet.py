@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import spatial
 
-from ssd_jax import augment, geometry, inference, objective, train
+from ssd_jax import augment, config_checks, geometry, inference, objective, train
 from ssd_jax.data import clean, datasets, io, kitti
 from ssd_jax.evaluation import orientation, repeatability, triplets
 
@@ -174,7 +174,7 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
   jax.tree.map(np.testing.assert_array_equal, handed.batch_stats['descriptor'],
                jax.device_get(pre_state.batch_stats['descriptor']))
   jax.tree.map(np.testing.assert_array_equal, handed.params['detector'], fresh.params['detector'])
-  with pytest.raises(train.ConfigError, match='train.init_from: .*no such checkpoint'):
+  with pytest.raises(config_checks.ConfigError, match='train.init_from: .*no such checkpoint'):
     train.initialize_from(fresh, str(tmp_path / 'nowhere'), full)
   # ... and through the training entry: stage 2 starts from stage 1's descriptor.
   full.train.num_steps, full.train.init_from = 2, str(tmp_path / 'pre')
@@ -199,8 +199,8 @@ def test_baseline_config_errors(tiny_config, override, message):
       tiny_config.data[key] = value
     else:
       tiny_config.model[key] = value
-  with pytest.raises(train.ConfigError, match=message):
-    train.check_config(tiny_config)
+  with pytest.raises(config_checks.ConfigError, match=message):
+    config_checks.check_config(tiny_config)
 
 
 def _attention_grad(config):

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from ssd_jax import checkpoint, inference, pretrained, train
-from ssd_jax.data import io
 from tests.conftest import tiny_config_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -15,7 +15,6 @@ import os
 from pathlib import Path
 from typing import Iterator, Sequence
 
-from absl import logging
 import numpy as np
 
 from ssd_jax.data import clean, io

@@ -1,0 +1,116 @@
+"""Checks of a training config: every value in range and consistent (`check_config`),
+and whether a run stored in a workdir may continue under it (`check_resumable`). Each
+failure is a `ConfigError` whose message names the field and the value."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import ml_collections
+
+from ssd_jax import augment, grouping, network, objective
+from ssd_jax.data import datasets
+
+AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
+LR_SCHEDULES = ('constant', 'cosine')
+
+
+
+class ConfigError(ValueError):
+  """A config value is out of range or inconsistent."""
+
+
+def check_config(config: ml_collections.ConfigDict, num_devices: int | None = None) -> None:
+  """Raise `ConfigError` naming the first bad value."""
+  m, t, d = config.model, config.train, config.data
+
+  def require(ok: bool, msg: str):
+    if not ok:
+      raise ConfigError(msg)
+
+  require(config.objective in objective.OBJECTIVES,
+          f'objective must be one of {tuple(objective.OBJECTIVES)}, got {config.objective!r}')
+  bad = set(m.augmentations) - set(AUGMENTATIONS)
+  require(not bad, f'model.augmentations: unknown {sorted(bad)}; choose from {AUGMENTATIONS}')
+  require(d.triplet_axes in datasets.TRIPLET_AXES,
+          f'data.triplet_axes must be one of {datasets.TRIPLET_AXES}, got {d.triplet_axes!r}')
+  require(d.triplet_positives in datasets.TRIPLET_POSITIVES,
+          f'data.triplet_positives must be one of {datasets.TRIPLET_POSITIVES}, '
+          f'got {d.triplet_positives!r}')
+  require(m.margin >= 0, f'model.margin must be >= 0, got {m.margin}')
+  require(m.triplet_hinge in objective.TRIPLET_HINGES,
+          f'model.triplet_hinge must be one of {objective.TRIPLET_HINGES}, got {m.triplet_hinge!r}')
+  require(m.attention_normalization in objective.ATTENTION_NORMALIZATIONS,
+          f'model.attention_normalization must be one of {objective.ATTENTION_NORMALIZATIONS}, '
+          f'got {m.attention_normalization!r}')
+  require(not (m.attention_in_cf and not m.use_orientation),
+          'model.attention_in_cf needs model.use_orientation (the detector predicts attention)')
+  require(m.descriptor_dim in network.DESCRIPTOR_DIMS,
+          f'model.descriptor_dim must be one of {network.DESCRIPTOR_DIMS}, got {m.descriptor_dim}')
+  require(m.num_clusters >= 3, f'model.num_clusters must be >= 3, got {m.num_clusters}')
+  require(m.num_samples >= 1, f'model.num_samples must be >= 1, got {m.num_samples}')
+  require(m.radius > 0, f'model.radius must be > 0 metres, got {m.radius}')
+  require(m.alpha > 0, f'model.alpha must be > 0, got {m.alpha}')
+  require(m.loss in objective.ROTATION_LOSSES,
+          f'model.loss must be one of {objective.ROTATION_LOSSES}, got {m.loss!r}')
+  require(m.center_sampling in grouping.SAMPLERS,
+          f'model.center_sampling must be one of {grouping.SAMPLERS}, got {m.center_sampling!r}')
+  require(m.rotation_sigma >= 0, f'model.rotation_sigma must be >= 0, got {m.rotation_sigma}')
+  require(m.self_rotation in augment.SELF_ROTATIONS,
+          f'model.self_rotation must be one of {augment.SELF_ROTATIONS}, got {m.self_rotation!r}')
+  require(m.orientation_head in network.ORIENTATION_HEADS,
+          f'model.orientation_head must be one of {network.ORIENTATION_HEADS}, '
+          f'got {m.orientation_head!r}')
+  require(0 <= m.branch_dropout <= 0.9,
+          f'model.branch_dropout must be in [0, 0.9], got {m.branch_dropout}')
+  require(m.branch_crop_shift >= 0,
+          f'model.branch_crop_shift must be >= 0 metres, got {m.branch_crop_shift}')
+  require(m.branch_crop_radius > 0,
+          f'model.branch_crop_radius must be > 0 metres, got {m.branch_crop_radius}')
+  require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
+  require(d.num_points >= m.num_clusters,
+          f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '
+          'every cluster center is one of the input points')
+  require(config.inference.num_samples >= 0,
+          f'inference.num_samples must be >= 0 (0: model.num_samples), '
+          f'got {config.inference.num_samples}')
+  require(config.inference.draws >= 1,
+          f'inference.draws must be >= 1, got {config.inference.draws}')
+  require(t.batch_size >= 1, f'train.batch_size must be >= 1, got {t.batch_size}')
+  require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
+  require(t.get('lr_schedule', 'constant') in LR_SCHEDULES,
+          f'train.lr_schedule must be one of {LR_SCHEDULES}, got {t.get("lr_schedule")!r}')
+  require(t.num_steps >= 1, f'train.num_steps must be >= 1, got {t.num_steps}')
+  require(t.log_every >= 1 and t.checkpoint_every >= 1 and t.eval_every >= 1,
+          'train.log_every, train.eval_every and train.checkpoint_every must be >= 1')
+  n = jax.local_device_count() if num_devices is None else num_devices
+  require(t.batch_size % n == 0,
+          f'train.batch_size ({t.batch_size}) must be divisible by the {n} local devices '
+          '(the batch is split across them)')
+
+
+ADDED_MODEL_KEYS = {'triplet_hinge': 'cluster', 'attention_normalization': 'softmax',
+                    'self_rotation': 'gaussian', 'orientation_head': 'mlp',
+                    'branch_dropout': 0.0, 'branch_crop_shift': 0.0, 'branch_crop_radius': 20.0}
+TRIPLET_ONLY_KEYS = ('triplet_hinge', 'attention_normalization')
+
+
+def check_resumable(config: ml_collections.ConfigDict, stored: dict, directory: str) -> None:
+  """Refuse to continue a checkpoint written with a different model or seed."""
+  current = json.loads(json.dumps(config.to_dict()))   # tuples -> lists, as stored
+  for section in ('model',):
+    for key, value in current[section].items():
+      if key not in stored.get(section, {}) and key in ADDED_MODEL_KEYS:
+        if key in TRIPLET_ONLY_KEYS and stored.get('objective') != 'triplet':
+          continue   # a triplet-only setting that the stored run never used
+        was = ADDED_MODEL_KEYS[key]
+      else:
+        was = stored.get(section, {}).get(key)
+      if was != value:
+        raise ConfigError(
+            f'{directory} holds a run with {section}.{key}={was!r}, '
+            f'but the config says {value!r}; use a new --workdir or the same config')
+  if stored.get('seed') != config.seed:
+    raise ConfigError(f'{directory} holds a run with seed={stored.get("seed")}, but the config '
+                      f'says {config.seed}; use a new --workdir or the same seed')

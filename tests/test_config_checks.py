@@ -1,0 +1,54 @@
+"""ssd_jax.config_checks: bad config values are named, and stored runs resume only under
+the config they were trained with (old runs with the values they used)."""
+
+import json
+
+import pytest
+
+from ssd_jax import config_checks
+
+
+def test_config_errors_name_the_value(tiny_config):
+  cases = [('model.descriptor_dim', 20, 'descriptor_dim must be one of'),
+           ('model.loss', 'l1', 'model.loss must be one of'),
+           ('model.center_sampling', 'grid', 'center_sampling must be one of'),
+           ('data.num_points', 32, r'data.num_points \(32\) must be >= model.num_clusters'),
+           ('model.radius', 0.0, 'radius must be > 0'),
+           ('model.triplet_hinge', 'anchor', "triplet_hinge must be one of .*'anchor'"),
+           ('model.attention_normalization', 'max', 'attention_normalization must be one of'),
+           ('model.self_rotation', 'vonmises', "self_rotation must be one of .*'vonmises'"),
+           ('model.orientation_head', 'pca', 'orientation_head must be one of'),
+           ('model.branch_dropout', 1.0, r'branch_dropout must be in \[0, 0.9\]'),
+           ('model.branch_crop_shift', -1.0, 'branch_crop_shift must be >= 0'),
+           ('model.branch_crop_radius', 0.0, 'branch_crop_radius must be > 0'),
+           ('train.lr_schedule', 'step', "lr_schedule must be one of .*'step'")]
+  for field, value, message in cases:
+    config = tiny_config.copy_and_resolve_references()
+    section, name = field.split('.')
+    config[section][name] = value
+    with pytest.raises(config_checks.ConfigError, match=message):
+      config_checks.check_config(config)
+
+
+def test_batch_must_split_over_devices(tiny_config):
+  tiny_config.train.batch_size = 3
+  with pytest.raises(config_checks.ConfigError, match=r'batch_size \(3\) must be divisible by the 2 local'):
+    config_checks.check_config(tiny_config, num_devices=2)
+
+
+def test_runs_from_before_a_model_key_existed_resume_with_its_old_value(tiny_config):
+  tiny_config.objective = 'triplet'
+  stored = json.loads(json.dumps(tiny_config.to_dict()))
+  for key in config_checks.ADDED_MODEL_KEYS:
+    del stored['model'][key]
+  tiny_config.model.triplet_hinge = 'cluster'
+  config_checks.check_resumable(tiny_config, stored, 'old_run')      # what old runs used: accepted
+  tiny_config.model.triplet_hinge = 'cloud'
+  with pytest.raises(config_checks.ConfigError, match="old_run holds a run with model.triplet_hinge='cluster'"):
+    config_checks.check_resumable(tiny_config, stored, 'old_run')
+  stored['objective'] = 'self_supervised'    # never used the triplet loss: nothing to refuse
+  config_checks.check_resumable(tiny_config, stored, 'old_run')
+  # A self-supervised run from before the full-circle options drew Gaussian angles.
+  tiny_config.model.self_rotation = 'uniform'
+  with pytest.raises(config_checks.ConfigError, match="model.self_rotation='gaussian'"):
+    config_checks.check_resumable(tiny_config, stored, 'old_run')
