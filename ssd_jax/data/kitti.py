@@ -11,10 +11,13 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
+from tqdm import auto as tqdm
 
 from ssd_jax import geometry
+from ssd_jax.data import groundtruth, io, preprocess
 from ssd_jax.data.io import CloudFileError
 
 
@@ -64,3 +67,56 @@ def keyframes(positions: np.ndarray, spacing: float) -> np.ndarray:
       kept.append(i)
       last = positions[i]
   return np.array(kept)
+
+
+# (target cloud [N1, 3], source cloud [N2, 3], initial T_12 [4, 4]) -> (refined T_12, fitness)
+Refine = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, float]]
+
+
+def process_sequence(root: str, seq: str, out: str, spacing: float = 10.0,
+                     pair_distance: float = 10.0, voxel: float = 0.2, normal_radius: float = 1.0,
+                     refine: Refine | None = None) -> tuple[int, int, list[dict]]:
+  """One raw odometry sequence -> OUT/<seq>/: %06d.bin (N x 6: `voxel`-metre grid +
+  normals within `normal_radius`), groundtruths.txt (pairs < `pair_distance` metres),
+  poses.txt (velodyne-frame poses of the kept frames, one every `spacing` metres).
+
+  With `refine` (e.g. registration.pipeline.refine_icp) each pair's pose is refined from
+  KITTI's: groundtruths.txt then holds the refined pose, groundtruths_kitti.txt KITTI's,
+  and icp_corrections.txt how far they differ. -> (clouds kept, pairs, [per-pair
+  correction: idx1, idx2, fitness, rte (m), rre_geodesic (degrees)]).
+  """
+  tr = read_velodyne_to_camera(os.path.join(root, 'sequences', seq, 'calib.txt'))
+  poses = velodyne_poses(read_poses(os.path.join(root, 'poses', f'{seq}.txt')), tr)
+  kept = keyframes(poses[:, :3, 3], spacing)
+  folder = os.path.join(out, seq)
+  os.makedirs(folder, exist_ok=True)
+  clouds = {}
+  for i in tqdm.tqdm(kept, desc=f'sequence {seq}', unit='cloud'):
+    raw = io.read_cloud(os.path.join(root, 'sequences', seq, 'velodyne', f'{i:06d}.bin'), 'xyzi')
+    pts, normals = preprocess.process_scan(raw[np.all(np.isfinite(raw), 1)], voxel,
+                                           normal_radius)
+    io.write_bin(os.path.join(folder, f'{i:06d}.bin'), pts, normals)
+    clouds[int(i)] = pts
+  write_poses(os.path.join(folder, 'poses.txt'), poses[kept])
+  pairs = [groundtruth.GroundTruthPair(int(kept[a]), int(kept[b]),
+                                       groundtruth.relative_pose(poses, kept[a], kept[b]))
+           for a, b in groundtruth.close_pairs(poses[kept, :3, 3], pair_distance)]
+  corrections = []
+  if refine is not None:
+    groundtruth.write_groundtruths(os.path.join(folder, 'groundtruths_kitti.txt'), pairs)
+    refined = []
+    for p in pairs:
+      t, fitness = refine(clouds[p.idx1], clouds[p.idx2], p.transform)
+      refined.append(groundtruth.GroundTruthPair(p.idx1, p.idx2, t))
+      corrections.append({
+          'idx1': p.idx1, 'idx2': p.idx2, 'fitness': fitness,
+          'rte': float(geometry.translation_error(p.transform[:3, 3], t[:3, 3])),
+          'rre_geodesic': float(geometry.geodesic_angle_deg(p.transform[:3, :3], t[:3, :3]))})
+    pairs = refined
+    with open(os.path.join(folder, 'icp_corrections.txt'), 'w') as f:
+      f.write('idx1\tidx2\tfitness\tdelta_t_m\tdelta_r_deg\n')
+      for c in corrections:
+        f.write(f'{c["idx1"]}\t{c["idx2"]}\t{c["fitness"]:.3f}\t{c["rte"]:.3f}\t'
+                f'{c["rre_geodesic"]:.3f}\n')
+  groundtruth.write_groundtruths(os.path.join(folder, 'groundtruths.txt'), pairs)
+  return len(kept), len(pairs), corrections
