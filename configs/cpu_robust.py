@@ -15,7 +15,7 @@ instead of 1) and a learning rate decayed to 0 at the last step (cosine). At inf
 each keypoint's descriptor averages 4 samplings of 64 points of its ball. The loss is
 still the paper's ||I - R R_gt^T||_F of the CF rotation.
 
-Expected (seed 0, 2-core CPU VM, measured 2026-12-02; ~7 steps/s alone, so ~15
+Expected (seed 0, 2-core CPU VM, measured 2026-12-02; 6.7-7.8 steps/s alone, so ~15
 minutes): at 6,000 steps ISS + ours registers 99.1 % of the KITTI-style synthetic
 test pairs (100 % with each scan turned by a random yaw), 84.9 % of the Oxford-style
 ones and 98.8 % of the real re-scan pairs (experiments.learning_curve; ISS + FPFH:

@@ -29,39 +29,31 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
     if not ok:
       raise ConfigError(msg)
 
-  require(config.objective in objective.OBJECTIVES,
-          f'objective must be one of {tuple(objective.OBJECTIVES)}, got {config.objective!r}')
+  def one_of(field: str, choices):
+    section, _, key = field.rpartition('.')
+    value = (config[section] if section else config).get(key)
+    require(value in choices, f'{field} must be one of {tuple(choices)}, got {value!r}')
+
+  one_of('objective', objective.OBJECTIVES)
   bad = set(m.augmentations) - set(AUGMENTATIONS)
   require(not bad, f'model.augmentations: unknown {sorted(bad)}; choose from {AUGMENTATIONS}')
-  require(d.triplet_axes in datasets.TRIPLET_AXES,
-          f'data.triplet_axes must be one of {datasets.TRIPLET_AXES}, got {d.triplet_axes!r}')
-  require(d.triplet_positives in datasets.TRIPLET_POSITIVES,
-          f'data.triplet_positives must be one of {datasets.TRIPLET_POSITIVES}, '
-          f'got {d.triplet_positives!r}')
+  one_of('data.triplet_axes', datasets.TRIPLET_AXES)
+  one_of('data.triplet_positives', datasets.TRIPLET_POSITIVES)
   require(m.margin >= 0, f'model.margin must be >= 0, got {m.margin}')
-  require(m.triplet_hinge in objective.TRIPLET_HINGES,
-          f'model.triplet_hinge must be one of {objective.TRIPLET_HINGES}, got {m.triplet_hinge!r}')
-  require(m.attention_normalization in objective.ATTENTION_NORMALIZATIONS,
-          f'model.attention_normalization must be one of {objective.ATTENTION_NORMALIZATIONS}, '
-          f'got {m.attention_normalization!r}')
+  one_of('model.triplet_hinge', objective.TRIPLET_HINGES)
+  one_of('model.attention_normalization', objective.ATTENTION_NORMALIZATIONS)
   require(not (m.attention_in_cf and not m.use_orientation),
           'model.attention_in_cf needs model.use_orientation (the detector predicts attention)')
-  require(m.descriptor_dim in network.DESCRIPTOR_DIMS,
-          f'model.descriptor_dim must be one of {network.DESCRIPTOR_DIMS}, got {m.descriptor_dim}')
+  one_of('model.descriptor_dim', network.DESCRIPTOR_DIMS)
   require(m.num_clusters >= 3, f'model.num_clusters must be >= 3, got {m.num_clusters}')
   require(m.num_samples >= 1, f'model.num_samples must be >= 1, got {m.num_samples}')
   require(m.radius > 0, f'model.radius must be > 0 metres, got {m.radius}')
   require(m.alpha > 0, f'model.alpha must be > 0, got {m.alpha}')
-  require(m.loss in objective.ROTATION_LOSSES,
-          f'model.loss must be one of {objective.ROTATION_LOSSES}, got {m.loss!r}')
-  require(m.center_sampling in grouping.SAMPLERS,
-          f'model.center_sampling must be one of {grouping.SAMPLERS}, got {m.center_sampling!r}')
+  one_of('model.loss', objective.ROTATION_LOSSES)
+  one_of('model.center_sampling', grouping.SAMPLERS)
   require(m.rotation_sigma >= 0, f'model.rotation_sigma must be >= 0, got {m.rotation_sigma}')
-  require(m.self_rotation in augment.SELF_ROTATIONS,
-          f'model.self_rotation must be one of {augment.SELF_ROTATIONS}, got {m.self_rotation!r}')
-  require(m.orientation_head in network.ORIENTATION_HEADS,
-          f'model.orientation_head must be one of {network.ORIENTATION_HEADS}, '
-          f'got {m.orientation_head!r}')
+  one_of('model.self_rotation', augment.SELF_ROTATIONS)
+  one_of('model.orientation_head', network.ORIENTATION_HEADS)
   require(0 <= m.branch_dropout <= 0.9,
           f'model.branch_dropout must be in [0, 0.9], got {m.branch_dropout}')
   require(m.branch_crop_shift >= 0,
@@ -79,8 +71,8 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'inference.draws must be >= 1, got {config.inference.draws}')
   require(t.batch_size >= 1, f'train.batch_size must be >= 1, got {t.batch_size}')
   require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
-  require(t.get('lr_schedule', 'constant') in LR_SCHEDULES,
-          f'train.lr_schedule must be one of {LR_SCHEDULES}, got {t.get("lr_schedule")!r}')
+  require(t.get('lr_schedule', 'constant') in LR_SCHEDULES,   # runs from before it: constant
+          f'train.lr_schedule must be one of {LR_SCHEDULES}, got {t.lr_schedule!r}')
   require(t.num_steps >= 1, f'train.num_steps must be >= 1, got {t.num_steps}')
   require(t.log_every >= 1 and t.checkpoint_every >= 1 and t.eval_every >= 1,
           'train.log_every, train.eval_every and train.checkpoint_every must be >= 1')

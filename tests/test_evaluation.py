@@ -14,9 +14,11 @@ import pytest
 
 from ssd_jax import geometry, inference, pretrained, train
 from ssd_jax.configs import cpu_small
+from ssd_jax.configs import registration as registration_config
 from ssd_jax.data import benchmarks, clusters, io
-from ssd_jax.evaluation import (descriptor_matching, feature_store, fingerprint, learning_curve,
-                                orientation, precision, registration, repeatability)
+from ssd_jax.evaluation import (descriptor_matching, evaluators, feature_store, fingerprint,
+                                learning_curve, orientation, precision, registration,
+                                repeatability)
 from tests.conftest import tiny_config_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -228,6 +230,10 @@ def test_evaluate_names_a_bad_type_and_missing_data(tmp_path):
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
   assert run.returncode != 0 and 'Traceback' not in run.stderr
   assert f'no registration set at {tmp_path / "nope"}' in run.stderr
+  empty = registration_config.get_config()
+  del empty.evals.registration
+  with pytest.raises(ValueError, match='config.evals is empty'):
+    evaluators.evaluate(empty, tmp_path / 'out')
 
 
 def test_plot_keypoints_cli(synthetic_root, tmp_path):

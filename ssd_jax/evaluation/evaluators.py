@@ -188,12 +188,27 @@ def _registration_figures(name, ev, ctx: Context, set_name, pair, skipped) -> li
   return parts
 
 
-EVALUATORS: dict[str, Callable[[str, ml_collections.ConfigDict, Context], Section]] = {
-    'registration': _registration,
-    'precision': _precision,
-    'repeatability': _repeatability,
-    'descriptor_matching': _descriptor_matching,
-    'figures': _figures,
+@dataclasses.dataclass(frozen=True)
+class Evaluator:
+  run: Callable[[str, ml_collections.ConfigDict, Context], Section]
+  # (config, ev) -> the keypoint x descriptor rows it computes (which checkpoints to load)
+  rows: Callable[[ml_collections.ConfigDict, ml_collections.ConfigDict], list[str]]
+
+
+def _config_rows(config, ev):
+  del ev
+  return list(config.rows)
+
+
+EVALUATORS = {
+    'registration': Evaluator(_registration, _config_rows),
+    'precision': Evaluator(_precision, _config_rows),
+    'repeatability': Evaluator(_repeatability,
+                               lambda config, ev: [f'{s}+fpfh' for s in ev.keypoint_sources]),
+    'descriptor_matching': Evaluator(_descriptor_matching,
+                                     lambda config, ev: [f'iss+{d}' for d in ev.descriptors]),
+    'figures': Evaluator(_figures, lambda config, ev: list(ev.registration_rows) + [
+        f'{s}+fpfh' for s in ev.keypoint_sources]),
 }
 TYPES = tuple(EVALUATORS)
 
@@ -212,16 +227,7 @@ def ordered_evals(config: ml_collections.ConfigDict) -> list[tuple[str, ml_colle
 
 def rows_needed(config: ml_collections.ConfigDict) -> list[str]:
   """Every keypoint x descriptor row the evaluations use (for loading checkpoints)."""
-  rows = []
-  for _, ev in ordered_evals(config):
-    if ev.type in ('registration', 'precision'):
-      rows += list(config.rows)
-    elif ev.type == 'repeatability':
-      rows += [f'{s}+fpfh' for s in ev.keypoint_sources]
-    elif ev.type == 'descriptor_matching':
-      rows += [f'iss+{d}' for d in ev.descriptors]
-    else:
-      rows += list(ev.registration_rows) + [f'{s}+fpfh' for s in ev.keypoint_sources]
+  rows = [r for _, ev in ordered_evals(config) for r in EVALUATORS[ev.type].rows(config, ev)]
   return list(dict.fromkeys(rows))
 
 
@@ -246,7 +252,7 @@ def evaluate(config: ml_collections.ConfigDict, workdir: str | os.PathLike,
     log(f'[{n}/{len(evals)}] {ev.title}')
     t0 = time.perf_counter()
     try:
-      section = EVALUATORS[ev.type](name, ev, ctx)
+      section = EVALUATORS[ev.type].run(name, ev, ctx)
     except Unavailable as e:
       skipped.append(f'{ev.title}: {e}')
       continue
