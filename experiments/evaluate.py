@@ -8,7 +8,9 @@ configs/registration.py (Tables I / II), precision.py (Fig. 4), repeatability.py
 descriptor_matching.py (Table III) name one evaluation each; reproduce.py names every
 table and figure of the paper (ssd_jax/evaluation/evaluators.py describes the types).
 Writes each evaluation's tables and figures into WORKDIR under its name, and
-WORKDIR/report.md.
+WORKDIR/report.md. With --coordinator_address / --num_processes / --process_id (or a
+Slurm, Open MPI or Cloud TPU launcher) the same command runs over several processes:
+each evaluation splits its pairs over them, and process 0 writes the one report.
 """
 
 import shlex
@@ -16,14 +18,16 @@ import sys
 
 from absl import app
 from absl import flags
+import jax
 
-from ssd_jax import cli
+from ssd_jax import cli, distributed
 from ssd_jax.evaluation import evaluators
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Output directory.')
 cli.define_config_file('config', 'configs/registration.py', 'Evaluation config.')
+cli.define_distributed_flags()
 flags.mark_flags_as_required(['workdir'])
 
 
@@ -31,13 +35,20 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
+  cli.initialize_distributed()
   command = 'python -m experiments.evaluate ' + shlex.join(sys.argv[1:])
   try:   # bad rows or types, missing, truncated or degenerate data: one line, no traceback
     path, text = evaluators.evaluate(FLAGS.config, FLAGS.workdir, command)
   except ValueError as e:
     raise SystemExit(f'error: {e}') from None
-  print(text)
-  print(f'\nwrote {path}')
+  except jax.errors.JaxRuntimeError as e:
+    if jax.process_count() == 1:
+      raise
+    distributed.fail(f'gathering results from the other processes failed '
+                     f'({str(e).splitlines()[0][:200]}): another process probably stopped')
+  if distributed.is_main():
+    print(text)
+    print(f'\nwrote {path}')
 
 
 def console():

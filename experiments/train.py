@@ -3,7 +3,13 @@ r"""Train the self-supervised descriptor.
     python -m experiments.train --config=configs/cpu_small.py --workdir=runs/small \
         --config.data.path=../shared/data/kitti_object_velodyne
 
-Rerunning the same command resumes from the latest checkpoint in --workdir.
+Rerunning the same command resumes from the latest checkpoint in --workdir. The same
+command runs over several processes (README, "Many machines"), e.g. two on one host:
+
+    python -m experiments.train --config=configs/cpu_small.py --workdir=runs/two \
+        --coordinator_address=localhost:12355 --num_processes=2 --process_id=0 &
+    python -m experiments.train --config=configs/cpu_small.py --workdir=runs/two \
+        --coordinator_address=localhost:12355 --num_processes=2 --process_id=1
 """
 
 import os
@@ -17,13 +23,14 @@ from absl import flags
 from absl import logging
 import jax
 
-from ssd_jax import checkpoint, config_checks, train
+from ssd_jax import checkpoint, config_checks, distributed, train
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.data import clean, io
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Directory for checkpoints and metrics.jsonl.')
 cli.define_config_file('config', None, 'Training config file.', lock_config=True)
+cli.define_distributed_flags()
 flags.mark_flags_as_required(['config', 'workdir'])
 
 
@@ -31,7 +38,9 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
-  logging.info('JAX devices: %s', jax.devices())
+  cli.initialize_distributed()
+  logging.info('JAX devices: %s (process %d of %d)', jax.devices(), jax.process_index(),
+               jax.process_count())
   try:
     train.train_and_evaluate(FLAGS.config, FLAGS.workdir)
   except io.CloudFileError as e:
@@ -43,6 +52,12 @@ def main(argv):
   except (config_checks.ConfigError, clean.CloudDataError, train.TrainingDiverged,
           checkpoint.CheckpointError) as e:
     raise SystemExit(f'error: {e}') from None
+  except jax.errors.JaxRuntimeError as e:
+    if jax.process_count() == 1:
+      raise
+    # A collective whose peer is gone (gloo: "Connection reset by peer"; NCCL alike).
+    distributed.fail(f'a step with the other processes failed ({str(e).splitlines()[0][:200]}): '
+                     f'another process probably stopped; {distributed.STOPPED_HINT}')
 
 
 def console():

@@ -18,6 +18,8 @@ import jax
 import ml_collections
 import orbax.checkpoint as ocp
 
+from ssd_jax import distributed
+
 # Appended to a damaged step folder's name when training moves it aside: orbax reads
 # only integer step names, and nothing is deleted.
 DAMAGED_SUFFIX = '.damaged'
@@ -150,7 +152,9 @@ class Checkpointer:
         return state, config
       except CheckpointError as e:
         aside = self._step_path(step) + DAMAGED_SUFFIX
-        os.replace(self._step_path(step), aside)
+        if distributed.is_main():   # the processes of a run share the folder
+          os.replace(self._step_path(step), aside)
+        distributed.barrier(f'checkpoint-aside-{step}')
         self._manager.reload()
         logging.warning('%s; moved it to %s and fell back to the checkpoint before it',
                         e, aside)

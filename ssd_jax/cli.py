@@ -13,6 +13,8 @@ from absl import app
 from absl import flags
 from ml_collections import config_flags
 
+from ssd_jax import distributed
+
 
 _CONFIG_FLAGS: set[str] = set()   # names of the flags defined by define_config_file
 
@@ -102,3 +104,28 @@ def define_config_file(name: str, default: str | None = None, help_string: str =
 def run(main: Callable[[list[str]], None]) -> None:
   """`absl.app.run(main)` with `parse_flags`."""
   app.run(main, flags_parser=parse_flags)
+
+
+def define_distributed_flags() -> None:
+  """The flags that join the processes of one run (`distributed.initialize`)."""
+  flags.DEFINE_string('coordinator_address', None,
+                      'host:port of process 0, for a run over several processes (unset: '
+                      'from JAX_COORDINATOR_ADDRESS, Slurm, Open MPI or Cloud TPU, or one '
+                      'process).')
+  flags.DEFINE_integer('num_processes', None, 'Processes in the run (unset: from the launcher).')
+  flags.DEFINE_integer('process_id', None, "This process's index in [0, num_processes).")
+  flags.DEFINE_integer('distributed_timeout', 300,
+                       'Seconds to wait for every process to join; a process that stops '
+                       'sending heartbeats for a third of this ends the run.')
+
+
+def initialize_distributed() -> None:
+  """`distributed.initialize` from the flags of `define_distributed_flags`; wrong
+  settings end in one line and exit status 2."""
+  f = flags.FLAGS
+  try:
+    distributed.initialize(f.coordinator_address, f.num_processes, f.process_id,
+                           timeout_s=f.distributed_timeout,
+                           heartbeat_s=max(1, f.distributed_timeout // 3))
+  except distributed.DistributedError as e:
+    _exit(str(e))

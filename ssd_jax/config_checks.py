@@ -76,10 +76,10 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
   require(t.num_steps >= 1, f'train.num_steps must be >= 1, got {t.num_steps}')
   require(t.log_every >= 1 and t.checkpoint_every >= 1 and t.eval_every >= 1,
           'train.log_every, train.eval_every and train.checkpoint_every must be >= 1')
-  n = jax.local_device_count() if num_devices is None else num_devices
+  n = jax.device_count() if num_devices is None else num_devices
   require(t.batch_size % n == 0,
-          f'train.batch_size ({t.batch_size}) must be divisible by the {n} local devices '
-          '(the batch is split across them)')
+          f'train.batch_size ({t.batch_size}) must be divisible by the {n} devices of the '
+          f'run ({jax.process_count()} process(es); the batch is split across them)')
 
 
 ADDED_MODEL_KEYS = {'triplet_hinge': 'cluster', 'attention_normalization': 'softmax',

@@ -2,8 +2,9 @@
 
 The whole step - self-rotation, jitter, center sampling, grouping, both network
 branches, CF, loss, Adam update and BatchNorm statistics - is one `jax.jit`
-with the train state donated. The batch is sharded over all local devices
-along its first axis (data parallel); the state is replicated.
+with the train state donated. The batch is sharded over every device of the run
+along its first axis (data parallel; with several processes each builds only its
+own rows, `distributed`), and the state is replicated.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 import optax
 from tqdm import auto as tqdm
 
-from ssd_jax import checkpoint, config_checks, inference, network, objective
+from ssd_jax import checkpoint, config_checks, distributed, inference, network, objective
 from ssd_jax.config_checks import ConfigError
 from ssd_jax.data import datasets
 
@@ -139,8 +140,8 @@ def probe_step(state: TrainState, triplets: jax.Array, key: jax.Array, *,
 
 
 def make_mesh(devices=None) -> jax.sharding.Mesh:
-  """A 1-D data-parallel mesh over `devices` (default: all local devices)."""
-  devices = jax.local_devices() if devices is None else devices
+  """A 1-D data-parallel mesh over `devices` (default: every device of every process)."""
+  devices = jax.devices() if devices is None else devices
   return jax.sharding.Mesh(np.asarray(devices), ('data',))
 
 
@@ -159,13 +160,19 @@ def jit_train_step(config: ml_collections.ConfigDict, mesh: jax.sharding.Mesh) -
 
 
 def replicate(tree: Any, mesh: jax.sharding.Mesh) -> Any:
+  """A copy of `tree` (the same values in every process) on every device of `mesh`."""
   sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
-  return jax.device_put(tree, sharding)
+  return jax.tree.map(lambda x: jax.make_array_from_process_local_data(sharding, np.asarray(x)),
+                      jax.device_get(tree))
 
 
-def shard_batch(points: np.ndarray, mesh: jax.sharding.Mesh) -> jax.Array:
+def shard_batch(local_points: np.ndarray, mesh: jax.sharding.Mesh,
+                global_batch: int) -> jax.Array:
+  """This process's rows `distributed.local_rows(global_batch)` of a batch -> the global
+  batch [global_batch, ...] split over the mesh's 'data' axis."""
   sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec('data'))
-  return jax.device_put(points, sharding)
+  return jax.make_array_from_process_local_data(sharding, local_points,
+                                                (global_batch, *local_points.shape[1:]))
 
 
 class MetricsWriter:
@@ -174,12 +181,13 @@ class MetricsWriter:
   On resume, lines logged after the restored step (by a run that was killed
   before its next checkpoint) are dropped, so the file reads like one
   uninterrupted run. A fresh start (`resume_step` 0) drops them all: its step-0
-  line is written again.
+  line is written again. Inactive (every process but the first of a run), it
+  writes nothing.
   """
 
-  def __init__(self, path: str, resume_step: int):
-    self.path = path
-    if os.path.exists(path):
+  def __init__(self, path: str, resume_step: int, active: bool = True):
+    self.path, self.active = path, active
+    if active and os.path.exists(path):
       with open(path) as f:
         kept = [line for line in f if line.strip() and 0 < resume_step
                 and json.loads(line)['step'] <= resume_step]
@@ -187,6 +195,8 @@ class MetricsWriter:
         f.writelines(kept)
 
   def write(self, record: dict[str, Any]) -> None:
+    if not self.active:
+      return
     with open(self.path, 'a') as f:
       f.write(json.dumps(record) + '\n')
 
@@ -284,39 +294,42 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
     state = replicate(initialize_from(jax.device_get(state), t_cfg.init_from, config), mesh)
     logging.info('Descriptor initialised from %s', t_cfg.init_from)
   start = int(state.step)
-  writer = MetricsWriter(os.path.join(workdir, 'metrics.jsonl'), start)
+  writer = MetricsWriter(os.path.join(workdir, 'metrics.jsonl'), start, distributed.is_main())
   step_fn = jit_train_step(config, mesh)
-  eval_fn = jax.jit(lambda s, p, k: eval_step(s, p, k, model=create_model(config), config=config))
-  eval_key = jax.random.key(config.seed + 2)
+  # The evaluation key is made inside the jitted function: with several processes an
+  # argument would have to be a global array.
+  eval_fn = jax.jit(lambda s, p: eval_step(s, p, jax.random.key(config.seed + 2),
+                                           model=create_model(config), config=config))
   # The triplet loss of a random batch is too noisy to read a trend from; the same
   # triplets, augmentations and centers at every evaluation are not.
   probe_points, probe_fn = None, None
   if config.objective == 'triplet':
     probe_points = probe_triplets(dataset, config)
-    probe_fn = jax.jit(lambda s, p, k: probe_step(s, p, k, model=create_model(config),
-                                                  config=config))
+    probe_fn = jax.jit(lambda s, p: probe_step(s, p, jax.random.key(config.seed + 2),
+                                               model=create_model(config), config=config))
 
   def evaluate(state) -> dict[str, float]:
     record = {}
     for prefix, fn, pts in (('eval', eval_fn, eval_points), ('probe', probe_fn, probe_points)):
       if pts is not None:
-        ev = jax.device_get(fn(state, jnp.asarray(pts), eval_key))
+        ev = jax.device_get(fn(state, replicate(pts, mesh)))
         record.update({f'{prefix}_{k}': float(v) for k, v in ev.items()})
     return record
 
   if start == 0 and (eval_points is not None or probe_points is not None):
     writer.write({'step': 0, **evaluate(state)})   # the untrained baseline of each curve
 
+  rows = distributed.local_rows(t_cfg.batch_size)
   make_batch = lambda step: dataset.batch(config.seed, step, t_cfg.batch_size,
-                                          config.data.num_points)
+                                          config.data.num_points, rows)
   batches = datasets.prefetch(make_batch, range(start, t_cfg.num_steps), config.data.prefetch)
   bar = tqdm.tqdm(total=t_cfg.num_steps, initial=start, desc='train', unit='step',
-                  dynamic_ncols=True, disable=not config.progress_bar)
+                  dynamic_ncols=True, disable=not (config.progress_bar and distributed.is_main()))
   pending: list[tuple[int, dict]] = []
   t_last, steps_since = time.perf_counter(), 0
   try:
     for step, points in zip(range(start, t_cfg.num_steps), batches):
-      state, metrics = step_fn(state, shard_batch(points, mesh))
+      state, metrics = step_fn(state, shard_batch(points, mesh, t_cfg.batch_size))
       pending.append((step + 1, metrics))
       steps_since += 1
       bar.update(1)

@@ -32,7 +32,7 @@ def test_config_errors_name_the_value(tiny_config):
 
 def test_batch_must_split_over_devices(tiny_config):
   tiny_config.train.batch_size = 3
-  with pytest.raises(config_checks.ConfigError, match=r'batch_size \(3\) must be divisible by the 2 local'):
+  with pytest.raises(config_checks.ConfigError, match=r'batch_size \(3\) must be divisible by the 2 devices of the run'):
     config_checks.check_config(tiny_config, num_devices=2)
 
 

@@ -181,6 +181,9 @@ def test_dataset_batches_are_a_function_of_seed_and_step():
   assert not np.array_equal(a, ds.batch(0, 6, 3, 256))
   assert not np.array_equal(a, ds.batch(1, 5, 3, 256))
   assert np.linalg.norm(a, axis=-1).max() < 20.0  # cropped
+  # A process of a multi-process run builds only its rows, and gets them exactly.
+  np.testing.assert_array_equal(ds.batch(0, 5, 3, 256, rows=[1, 2]), a[1:])
+  np.testing.assert_array_equal(ds.batch(0, 5, 3, 256, rows=[0]), a[:1])
 
 
 def test_dataset_refuses_clouds_far_from_their_sensor(tmp_path):

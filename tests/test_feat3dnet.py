@@ -71,6 +71,7 @@ def test_triplet_dataset_draws_valid_triplets(synthetic_root):
   assert b1.shape == (2, 3, 256, 3)
   np.testing.assert_array_equal(b1, data.batch(0, 3, 2, 256))
   assert not np.array_equal(b1, data.batch(0, 4, 2, 256))
+  np.testing.assert_array_equal(data.batch(0, 3, 2, 256, rows=[1]), b1[1:])   # one process's rows
   with pytest.raises(clean.CloudDataError, match='needs a 3DFeat-Net train.txt'):
     datasets.TripletDataset(synthetic_root / 'test_kitti' / '00')
 

@@ -41,6 +41,13 @@ def subsample(rng: np.random.Generator, points: np.ndarray, num_points: int) -> 
   return points[subsample_indices(rng, len(points), num_points)]
 
 
+def epoch_member(seed: int, position: int, n: int) -> int:
+  """The item at `position` of the stream that visits n items in epochs, each a fresh
+  permutation drawn from (seed, epoch)."""
+  epoch, pos = divmod(position, n)
+  return int(np.random.default_rng((seed, 1_000_003, epoch)).permutation(n)[pos])
+
+
 class CloudDataset:
   """Training clouds from files, cleaned and cropped on first use (LRU cached).
 
@@ -87,19 +94,21 @@ class CloudDataset:
     """Cleaned, cropped cloud i: [M_i, 3] float32 metres."""
     return self._load(i)
 
-  def batch(self, seed: int, step: int, batch_size: int, num_points: int) -> np.ndarray:
-    """The batch of `step`: [batch_size, num_points, 3] float32.
+  def batch(self, seed: int, step: int, batch_size: int, num_points: int,
+            rows: Sequence[int] | None = None) -> np.ndarray:
+    """Rows `rows` (default all) of the batch of `step`: [len(rows), num_points, 3] float32.
 
     Clouds are visited in epochs, each a fresh permutation drawn from
-    (seed, epoch); subsampling draws from (seed, step).
+    (seed, epoch); row r subsamples with its own stream (seed, step, r), so a
+    process that builds only its rows of a global batch (`distributed`) gets
+    exactly what one process building the whole batch would.
     """
-    n = len(self)
-    rng = np.random.default_rng((seed, step))
-    out = np.empty((batch_size, num_points, 3), np.float32)
-    for slot in range(batch_size):
-      epoch, pos = divmod(step * batch_size + slot, n)
-      order = np.random.default_rng((seed, 1_000_003, epoch)).permutation(n)
-      out[slot] = subsample(rng, self.cloud(int(order[pos])), num_points)
+    rows = range(batch_size) if rows is None else rows
+    out = np.empty((len(rows), num_points, 3), np.float32)
+    for k, slot in enumerate(rows):
+      out[k] = subsample(np.random.default_rng((seed, step, slot)),
+                         self.cloud(epoch_member(seed, step * batch_size + slot, len(self))),
+                         num_points)
     return out
 
 
@@ -183,19 +192,20 @@ class TripletDataset:
   def __len__(self) -> int:
     return len(self.anchors)
 
-  def batch(self, seed: int, step: int, batch_size: int, num_points: int) -> np.ndarray:
-    """The triplets of `step`: [batch_size, 3, num_points, 3] float32 (anchor, positive,
-    negative). Anchors are visited in seeded epochs; partners draw from (seed, step)."""
-    rng = np.random.default_rng((seed, step, 3))
-    out = np.empty((batch_size, 3, num_points, 3), np.float32)
-    for slot in range(batch_size):
-      epoch, pos = divmod(step * batch_size + slot, len(self.anchors))
-      order = np.random.default_rng((seed, 1_000_003, epoch)).permutation(len(self.anchors))
-      a = int(self.anchors[order[pos]])
+  def batch(self, seed: int, step: int, batch_size: int, num_points: int,
+            rows: Sequence[int] | None = None) -> np.ndarray:
+    """Rows `rows` (default all) of the triplets of `step`: [len(rows), 3, num_points, 3]
+    float32 (anchor, positive, negative). Anchors are visited in seeded epochs; row r
+    draws its partners and subsamples from its own stream (seed, step, r, 3)."""
+    rows = range(batch_size) if rows is None else rows
+    out = np.empty((len(rows), 3, num_points, 3), np.float32)
+    for k, slot in enumerate(rows):
+      rng = np.random.default_rng((seed, step, slot, 3))
+      a = int(self.anchors[epoch_member(seed, step * batch_size + slot, len(self.anchors))])
       p = int(rng.choice(self.positives[a]))
       q = int(rng.choice(self.negatives[a]))
       for j, i in enumerate((a, p, q)):
-        out[slot, j] = subsample(rng, self.clouds.cloud(i), num_points)
+        out[k, j] = subsample(rng, self.clouds.cloud(i), num_points)
     return out
 
 

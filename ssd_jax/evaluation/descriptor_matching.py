@@ -16,7 +16,7 @@ from typing import Mapping, Sequence
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import inference
+from ssd_jax import distributed, inference
 from ssd_jax.data import clean, clusters as clusters_lib, io
 from ssd_jax.registration import features as features_lib, keypoints
 
@@ -81,29 +81,30 @@ def describe_pairs(pairs: Sequence[clusters_lib.ClusterPair], descriptors: Mappi
 
   descriptors: {name: None for 'fpfh', else an inference.Model}. Learned
   descriptors use the model's own (trained) radius. Clusters are read `block`
-  pairs at a time. -> ({name: [P] distances}, [P, 2] ISS center distances).
+  pairs at a time; over several processes each describes its share of the blocks
+  (`distributed.map_items`), gathered. -> ({name: [P] distances}, [P, 2] ISS center
+  distances).
   """
-  dist = {name: [] for name in descriptors}
-  iss_dist = []
-  bar = tqdm.tqdm(total=len(pairs), desc='descriptor matching', unit='pair',
-                  disable=not progress)
-  for start in range(0, len(pairs), block):
-    part = pairs[start:start + block]
+  def describe_block(n, part) -> tuple[dict[str, np.ndarray], list]:
     c0 = [read_cluster(p.cluster0) for p in part]
     c1 = [read_cluster(p.cluster1) for p in part]
-    iss_dist.append([[center_keypoint_distance(a), center_keypoint_distance(b)]
-                     for a, b in zip(c0, c1)])
+    iss = [[center_keypoint_distance(a), center_keypoint_distance(b)] for a, b in zip(c0, c1)]
+    dist = {}
     for name, model in descriptors.items():
       if model is None:
         d0 = np.stack([fpfh_at_center(c, radius, fpfh_max_nn) for c in c0])
         d1 = np.stack([fpfh_at_center(c, radius, fpfh_max_nn) for c in c1])
       else:
         d0, d1 = inference.describe_clusters(model, c0), inference.describe_clusters(model, c1)
-      dist[name].append(np.linalg.norm(d0.astype(np.float64) - d1, axis=1))
-    bar.update(len(part))
-  bar.close()
-  return ({name: np.concatenate(v) for name, v in dist.items()},
-          np.concatenate(iss_dist).reshape(-1, 2))
+      dist[name] = np.linalg.norm(d0.astype(np.float64) - d1, axis=1)
+    return dist, iss
+
+  blocks = [pairs[start:start + block] for start in range(0, len(pairs), block)]
+  per_block = distributed.map_items(
+      describe_block, blocks, lambda ns: tqdm.tqdm(ns, desc='descriptor matching',
+                                                  unit=f'block of {block}', disable=not progress))
+  return ({name: np.concatenate([d[name] for d, _ in per_block]) for name in descriptors},
+          np.asarray([r for _, iss in per_block for r in iss], np.float64).reshape(-1, 2))
 
 
 def filtered_results(distances: Mapping[str, np.ndarray], labels: np.ndarray,

@@ -20,17 +20,20 @@ config.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import datetime
 import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Callable, Sequence
 
+import jax
 import ml_collections
 
-from ssd_jax import viz
+from ssd_jax import distributed, viz
 from ssd_jax.data import benchmarks, clusters, io
 from ssd_jax.evaluation import (descriptor_matching, feature_store, fingerprint, precision,
                                 registration, repeatability, report)
@@ -238,13 +241,25 @@ def evaluate(config: ml_collections.ConfigDict, workdir: str | os.PathLike,
   Writes each one's outputs and report.md into `workdir`; `command` is quoted in the
   report. Returns (report path, the Markdown of the evaluations that ran). Raises
   ValueError when none could run (the message says why for each) or on bad input.
+
+  Over several processes (`distributed`) every process runs this with the same config:
+  each evaluation splits its pairs over them and gathers the results, so all build the
+  same report, and only process 0 keeps its files (the others write to a scratch folder).
   """
-  log = log or (lambda s: print(s, file=sys.stderr, flush=True))
+  if not distributed.is_main():
+    with tempfile.TemporaryDirectory() as scratch:
+      _, text = _evaluate(config, Path(scratch), command, log=lambda s: None)
+    return Path(workdir) / 'report.md', text
+  return _evaluate(config, Path(workdir), command,
+                   log or (lambda s: print(s, file=sys.stderr, flush=True)))
+
+
+def _evaluate(config: ml_collections.ConfigDict, workdir: Path, command: str,
+              log: Callable[[str], None]) -> tuple[Path, str]:
   evals = ordered_evals(config)
   models, missing = feature_store.load_models(config.checkpoints,
                                               feature_store.model_names(rows_needed(config)))
   store = feature_store.FeatureStore(models, config.seed, config.fpfh_max_nn)
-  workdir = Path(workdir)
   workdir.mkdir(parents=True, exist_ok=True)
   ctx = Context(config, store, missing, workdir, Path(config.data_root or '.'))
   sections, skipped, seconds, ran = [], [], {}, []
@@ -284,7 +299,13 @@ def _report(config, ctx: Context, sections: Sequence[Section], skipped: Sequence
   lines += [f'- {s}' for s in skipped] or ['- nothing']
   for s in sections:
     lines += ['', f'## {s.title}', '', s.text.strip()]
-  stages = ctx.store.fingerprints()
+  # Over several processes each store holds its share of the files.
+  file_digests, store_seconds = {}, collections.Counter()
+  for digests, secs in distributed.gather((ctx.store.file_digests(), dict(ctx.store.seconds))):
+    for stage, files in digests.items():
+      file_digests.setdefault(stage, {}).update(files)
+    store_seconds.update(secs)
+  stages = ctx.store.fingerprints(file_digests)
   for name in registration_names:
     digests = fingerprint.registration_digests(ctx.workdir / f'{name}_pairs.jsonl')
     stages.update({f'registration: {name}, {row}': d for row, d in digests.items()})
@@ -292,6 +313,8 @@ def _report(config, ctx: Context, sections: Sequence[Section], skipped: Sequence
             fingerprint.markdown(stages, fingerprint.environment())]
   lines += ['', '## Time', '', '| stage | s |', '|---|---|']
   lines += [f'| {k} | {v:.1f} |' for k, v in seconds.items()]
-  lines += [f'| (within these) {k} | {v:.1f} |' for k, v in sorted(ctx.store.seconds.items())]
+  within = ('(within these, summed over processes)' if jax.process_count() > 1
+            else '(within these)')
+  lines += [f'| {within} {k} | {v:.1f} |' for k, v in sorted(store_seconds.items())]
   lines += ['', '## Config', '', '```', str(config).strip(), '```', '']
   return '\n'.join(lines)

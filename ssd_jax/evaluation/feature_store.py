@@ -129,16 +129,29 @@ class FeatureStore:
     return pipeline.CloudFeatures(self.cloud(path)[self.keypoints(path, kp)],
                                   self._descriptors[key], {})
 
-  def fingerprints(self) -> dict[str, str]:
-    """A digest per stage of what was computed: the clouds as read, the keypoints of
-    each source and the descriptors of each row, over the files in sorted order."""
-    out = {'clouds (as read)': fingerprint.digest(self._clouds[k] for k in sorted(self._clouds))}
-    for source in sorted({s for _, s in self._keypoints}):
-      keys = sorted(k for k in self._keypoints if k[1] == source)
-      out[f'keypoints: {source}'] = fingerprint.digest(self._keypoints[k] for k in keys)
-    for kp, desc in sorted({k[1:] for k in self._descriptors}):
-      keys = sorted(k for k in self._descriptors if k[1:] == (kp, desc))
-      out[f'descriptors: {kp}+{desc}'] = fingerprint.digest(self._descriptors[k] for k in keys)
+  def file_digests(self) -> dict[str, dict[str, str]]:
+    """{stage: {file: digest}} of what this store computed: the clouds as read, the
+    keypoints of each source, the descriptors of each row. The stores of several
+    processes (each with its share of the files) merge by updating these dicts."""
+    out = {'clouds (as read)': {k: fingerprint.digest([v]) for k, v in self._clouds.items()}}
+    for (path, source), idx in self._keypoints.items():
+      out.setdefault(f'keypoints: {source}', {})[path] = fingerprint.digest([idx])
+    for (path, kp, desc), d in self._descriptors.items():
+      out.setdefault(f'descriptors: {kp}+{desc}', {})[path] = fingerprint.digest([d])
+    return out
+
+  def fingerprints(self, file_digests: Mapping[str, Mapping[str, str]] | None = None,
+                   ) -> dict[str, str]:
+    """A digest per stage (of `file_digests`, default this store's own), over the files
+    in sorted order, and one of each model's weights."""
+    file_digests = self.file_digests() if file_digests is None else file_digests
+    order = lambda stage: (('clouds', 'keypoints', 'descriptors').index(stage.split()[0].rstrip(':')),
+                           stage)
+    out = {}
+    for stage in sorted(file_digests, key=order):
+      files = file_digests[stage]   # the paths order the digests but are not hashed
+      out[stage] = fingerprint.digest(
+          [np.frombuffer(''.join(files[p] for p in sorted(files)).encode(), np.uint8)])
     for name, model in sorted(self.models.items()):
       out[f'weights: {name}'] = fingerprint.params_digest(model.variables)
     return out

@@ -15,7 +15,7 @@ import numpy as np
 from scipy import spatial
 from tqdm import auto as tqdm
 
-from ssd_jax import geometry
+from ssd_jax import distributed, geometry
 from ssd_jax.evaluation import feature_store
 from ssd_jax.registration import matching
 
@@ -68,13 +68,11 @@ def evaluate_precision(pairs: Sequence, rows: Sequence[str], store: feature_stor
                        desc: str = 'precision') -> dict[str, dict]:
   """-> {row: {'errors': [M] pooled over pairs, 'keypoints': all cloud-1 keypoints,
   'curve': precision at THRESHOLDS}}."""
-  errors = {row: [] for row in rows}
-  counts = {row: 0 for row in rows}
-  for pair in tqdm.tqdm(pairs, desc=desc, unit='pair', disable=not progress):
-    for row in rows:
-      e, k = pair_errors(pair, row, store, overlap_radius)
-      errors[row].append(e)
-      counts[row] += k
+  per_pair = distributed.map_items(   # over several processes: each its share, gathered
+      lambda n, pair: {row: pair_errors(pair, row, store, overlap_radius) for row in rows},
+      pairs, lambda ns: tqdm.tqdm(ns, desc=desc, unit='pair', disable=not progress))
+  errors = {row: [p[row][0] for p in per_pair] for row in rows}
+  counts = {row: sum(p[row][1] for p in per_pair) for row in rows}
   out = {}
   for row in rows:
     e = np.concatenate(errors[row]) if errors[row] else np.zeros(0)

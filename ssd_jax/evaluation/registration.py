@@ -6,8 +6,10 @@ from __future__ import annotations
 import json
 from typing import Mapping, Sequence, TextIO
 
+import jax
 from tqdm import auto as tqdm
 
+from ssd_jax import distributed
 from ssd_jax.evaluation import feature_store, paper, tables
 from ssd_jax.registration import metrics, pipeline
 
@@ -22,10 +24,14 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
   result holds RTE, RRE (Euler sum, geodesic), success, trials and inliers (a pair
   with fewer than 3 keypoints in a cloud fails, with its `error`); with
-  `log`, one JSON line per pair and row is written to it.
+  `log`, one JSON line per pair and row is written to it. Over several processes each
+  registers its share of the pairs (`distributed.map_items`) and every process returns
+  all results; the log is written when they are gathered.
   """
-  results = {row: [] for row in rows}
-  for n, pair in enumerate(tqdm.tqdm(pairs, desc=desc, unit='pair', disable=not progress)):
+  one_process = jax.process_count() == 1
+
+  def register(n: int, pair) -> list[dict]:
+    out = []
     for row in rows:
       f1, f2 = store.features(pair.cloud1, row), store.features(pair.cloud2, row)
       res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
@@ -39,8 +45,18 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
       else:
         res.update(trials=reg.trials, inliers=int(reg.inliers.sum()),
                    **metrics.registration_errors(pair.transform, reg.transform))
-      results[row].append(res)
-      if log is not None:
+      out.append(res)
+      if log is not None and one_process:   # as it goes: a stopped run keeps its pairs
+        log.write(json.dumps(res) + '\n')
+    return out
+
+  per_pair = distributed.map_items(
+      register, pairs, lambda ns: tqdm.tqdm(ns, desc=desc, unit='pair', disable=not progress))
+  results = {row: [] for row in rows}
+  for pair_results in per_pair:
+    for res in pair_results:
+      results[res['row']].append(res)
+      if log is not None and not one_process:
         log.write(json.dumps(res) + '\n')
   return results
 

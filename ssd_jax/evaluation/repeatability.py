@@ -12,7 +12,7 @@ import numpy as np
 from scipy import spatial
 from tqdm import auto as tqdm
 
-from ssd_jax import geometry
+from ssd_jax import distributed, geometry
 from ssd_jax.evaluation import feature_store
 
 RADIUS = 0.5   # metres
@@ -37,14 +37,19 @@ def evaluate_repeatability(pairs: Sequence, sources: Sequence[str],
                            store: feature_store.FeatureStore, radius: float = RADIUS,
                            progress: bool = True) -> dict[str, dict]:
   """-> {source: {'repeatability': mean over pairs, 'keypoints': mean count per cloud}}."""
-  rep = {s: [] for s in sources}
-  counts = {s: [] for s in sources}
-  for pair in tqdm.tqdm(pairs, desc='repeatability', unit='pair', disable=not progress):
+  def measure(n, pair) -> dict[str, tuple[float, int, int]]:
+    out = {}
     for s in sources:
       k1 = store.cloud(pair.cloud1)[store.keypoints(pair.cloud1, s)]
       k2 = store.cloud(pair.cloud2)[store.keypoints(pair.cloud2, s)]
-      rep[s].append(keypoint_repeatability(k1, k2, pair.transform, radius))
-      counts[s] += [len(k1), len(k2)]
+      out[s] = (keypoint_repeatability(k1, k2, pair.transform, radius), len(k1), len(k2))
+    return out
+
+  per_pair = distributed.map_items(   # over several processes: each its share, gathered
+      measure, pairs,
+      lambda ns: tqdm.tqdm(ns, desc='repeatability', unit='pair', disable=not progress))
+  rep = {s: [p[s][0] for p in per_pair] for s in sources}
+  counts = {s: [c for p in per_pair for c in p[s][1:]] for s in sources}
   return {s: {'repeatability': float(np.nanmean(rep[s])) if rep[s] else float('nan'),
               'keypoints': float(np.mean(counts[s])) if counts[s] else float('nan')}
           for s in sources}
