@@ -47,7 +47,8 @@ def main(argv):
   if FLAGS.max_pairs:
     pairs = pairs[:FLAGS.max_pairs]
   cache = {}
-  rows = {'this project, JAX (batched)': [], 'Open3D': [], 'sequential numpy (reference)': []}
+  rows = {'this project (auto: numpy batches here)': [], 'this project, JAX kernel': [],
+          'Open3D': [], 'sequential numpy (reference)': []}
   for n, pair in enumerate(tqdm.tqdm(pairs, desc='pairs', unit='pair')):
     for path in (pair.cloud1, pair.cloud2):
       if path not in cache:
@@ -58,12 +59,15 @@ def main(argv):
     xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[nn].astype(np.float64)
     samples = ransac.draw_minimal_samples(np.random.default_rng(n), xyz2, 10_001)
     methods = {
-        'this project, JAX (batched)': lambda: ransac.ransac(xyz1, xyz2, samples).transform,
+        'this project (auto: numpy batches here)':
+            lambda: ransac.ransac(xyz1, xyz2, samples).transform,
+        'this project, JAX kernel':
+            lambda: ransac.ransac(xyz1, xyz2, samples, backend='jax').transform,
         'Open3D': lambda: open3d_ransac(xyz1, xyz2, 10_000, 0.99, 1.0, n),
         'sequential numpy (reference)':
             lambda: ransac.ransac_sequential(xyz1, xyz2, samples).transform,
     }
-    methods['this project, JAX (batched)']()   # compile outside the timing
+    methods['this project, JAX kernel']()   # compile outside the timing
     for name, fn in methods.items():
       times = []
       for _ in range(FLAGS.repeats if name != 'sequential numpy (reference)' else 1):

@@ -14,7 +14,7 @@ command runs over several processes (README, "Many machines"), e.g. two on one h
 
 import os
 
-from ssd_jax import cli, runtime
+from ssd_jax import runtime
 
 runtime.reexec_with_hugepages()
 
@@ -23,7 +23,7 @@ from absl import flags
 from absl import logging
 import jax
 
-from ssd_jax import checkpoint, config_checks, distributed, train
+from ssd_jax import checkpoint, cli, config_checks, distributed, train
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.data import clean, io
 

@@ -11,6 +11,7 @@ from typing import Callable, Sequence
 
 from absl import app
 from absl import flags
+import jax
 from ml_collections import config_flags
 
 from ssd_jax import distributed
@@ -101,9 +102,37 @@ def define_config_file(name: str, default: str | None = None, help_string: str =
     _exit(_override_message(e, sys.argv))
 
 
+def default_compilation_cache() -> str:
+  """$SSD_JAX_COMPILATION_CACHE, else $XDG_CACHE_HOME/ssd_jax/jax (~/.cache/ssd_jax/jax)."""
+  if 'SSD_JAX_COMPILATION_CACHE' in os.environ:
+    return os.environ['SSD_JAX_COMPILATION_CACHE']
+  base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
+  return os.path.join(base, 'ssd_jax', 'jax')
+
+
+flags.DEFINE_string('compilation_cache', default_compilation_cache(),
+                    "Folder of JAX's persistent compilation cache, so that a new process "
+                    "loads the kernels an earlier one compiled ('' disables it).")
+
+
+def enable_compilation_cache(directory: str) -> None:
+  """Keep every compiled XLA program in `directory` ('' does nothing): a new process
+  then loads the RANSAC, inference and training kernels instead of compiling them."""
+  if not directory:
+    return
+  jax.config.update('jax_compilation_cache_dir', directory)
+  # JAX caches only programs that took over a second to compile by default; the
+  # kernels of one registration take less each but add up in a fresh process.
+  jax.config.update('jax_persistent_cache_min_compile_time_secs', 0.0)
+  jax.config.update('jax_persistent_cache_min_entry_size_bytes', 0)
+
+
 def run(main: Callable[[list[str]], None]) -> None:
-  """`absl.app.run(main)` with `parse_flags`."""
-  app.run(main, flags_parser=parse_flags)
+  """`absl.app.run(main)` with `parse_flags`, and the compilation cache on."""
+  def with_cache(argv):
+    enable_compilation_cache(flags.FLAGS.compilation_cache)
+    return main(argv)
+  app.run(with_cache, flags_parser=parse_flags)
 
 
 def define_distributed_flags() -> None:

@@ -201,3 +201,19 @@ def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set
     moved = lambda m: src @ m[:3, :3].T + m[:3, 3]
     err = np.linalg.norm(moved(t) - moved(t_gt), axis=1)
     assert np.median(err) < 0.5 and err.max() < 2.0, (name, np.median(err), err.max())
+
+
+def test_the_compilation_cache_keeps_kernels_and_changes_no_result(tiny_set, tmp_path):
+  pair = benchmarks.read_registration_set(tiny_set / 'test_kitti' / '00')[0]
+  args = ['experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
+          '--descriptor=learned']
+  results = []
+  for n, cache in enumerate((tmp_path / 'cache', tmp_path / 'cache', '')):
+    out = _run(*args, f'--compilation_cache={cache}', f'--json={tmp_path / f"{n}.json"}')
+    assert out.returncode == 0, out.stderr[-3000:]
+    results.append(json.loads((tmp_path / f'{n}.json').read_text()))
+    if n == 0:
+      kept = sorted(p.name for p in (tmp_path / 'cache').iterdir())
+      assert len(kept) >= 2, kept   # the descriptor network's kernels, at least
+  assert sorted(p.name for p in (tmp_path / 'cache').iterdir()) == kept   # loaded, not rebuilt
+  assert results[0]['T_12'] == results[1]['T_12'] == results[2]['T_12']

@@ -68,20 +68,39 @@ def test_ransac_recovers_known_transform(outlier_fraction):
     assert 10 <= result.trials <= 3 * np.log(0.01) / np.log(1 - w ** 3) + 10
 
 
+@pytest.mark.parametrize('backend', ['numpy', 'jax'])
 @pytest.mark.parametrize('seed,outlier_fraction,n', [(0, 0.5, 100), (1, 0.8, 250), (2, 0.9, 300),
                                                      (3, 0.97, 500), (4, 1.0, 40)])
-def test_parallel_ransac_trial_count_equals_sequential_rule(seed, outlier_fraction, n):
+def test_batched_ransac_trial_count_equals_sequential_rule(seed, outlier_fraction, n, backend):
   """Same minimal samples => same stopping point, trial count, inliers and model;
   fully random matches run into the cap (10,001 trials)."""
   _, xyz1, xyz2, _ = _noisy_correspondences(np.random.default_rng(seed), n, outlier_fraction)
   samples = ransac.draw_minimal_samples(np.random.default_rng(seed + 10), xyz2, 10_001)
   seq = ransac.ransac_sequential(xyz1, xyz2, samples)
-  par = ransac.ransac(xyz1, xyz2, samples, batch_size=128)
+  par = ransac.ransac(xyz1, xyz2, samples, batch_size=128, backend=backend)
   assert par.trials == seq.trials
   np.testing.assert_array_equal(par.inliers, seq.inliers)
   np.testing.assert_allclose(par.transform, seq.transform, atol=1e-9)
   if outlier_fraction == 1.0:
     assert seq.trials == 10_001
+
+
+def test_ransac_scores_only_the_batches_the_rule_needs(monkeypatch):
+  """An easy pair stops after a few dozen trials: one first batch of 32 is scored,
+  not a full batch of 512; the batches then double."""
+  _, xyz1, xyz2, _ = _noisy_correspondences(np.random.default_rng(0), 200, 0.3)
+  samples = ransac.draw_minimal_samples(np.random.default_rng(1), xyz2, 10_001)
+  sizes = []
+  scorer = ransac._numpy_scorer
+  monkeypatch.setattr(ransac, '_numpy_scorer', lambda *a: (
+      lambda batch: sizes.append(len(batch)) or scorer(*a)(batch)))
+  assert ransac.ransac(xyz1, xyz2, samples).trials <= 32
+  assert sizes == [32]
+  _, xyz1, xyz2, _ = _noisy_correspondences(np.random.default_rng(0), 200, 0.9)
+  sizes.clear()
+  samples = ransac.draw_minimal_samples(np.random.default_rng(1), xyz2, 10_001)
+  trials = ransac.ransac(xyz1, xyz2, samples).trials
+  assert sizes[:5] == [32, 64, 128, 256, 512] and sum(sizes[:-1]) < trials <= sum(sizes)
 
 
 def test_minimal_samples_are_distinct_and_not_collinear():

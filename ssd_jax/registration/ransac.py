@@ -10,9 +10,13 @@ hypothesis is then refit on all its inliers.
 Both implementations consume the same pre-drawn sequence of minimal samples
 (`draw_minimal_samples`), so they agree trial for trial:
   * `ransac_sequential`: the straightforward loop, numpy (the reference);
-  * `ransac`: JAX, scoring `batch_size` hypotheses at once in one jitted call and
-    replaying the sequential stopping rule over their inlier counts, so the
-    stopping point and the reported trial count are the sequential ones.
+  * `ransac`: scores hypotheses in batches and replays the sequential stopping rule
+    over their inlier counts, so the stopping point and the reported trial count are
+    the sequential ones. Batches start small (32) and double up to `batch_size`, so a
+    pair that stops after a few hundred trials scores a few hundred, not thousands.
+    Up to `NUMPY_MAX_CORRESPONDENCES` matches (every ISS keypoint set here) a batch
+    is scored in numpy, with no compilation; beyond, in one jitted JAX call
+    (padded to power-of-two buckets so that many pairs reuse a few kernels).
 """
 
 from __future__ import annotations
@@ -35,13 +39,20 @@ class RansacResult:
 
 
 def kabsch(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-  """Least-squares rigid T [4, 4] with T src ≈ dst; src, dst [n, 3], n >= 3."""
-  mu_s, mu_d = src.mean(0), dst.mean(0)
-  u, _, vt = np.linalg.svd((src - mu_s).T @ (dst - mu_d))
-  d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-  rot = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-  t = np.eye(4)
-  t[:3, :3], t[:3, 3] = rot, mu_d - rot @ mu_s
+  """Least-squares rigid T [..., 4, 4] with T src ≈ dst; src, dst [..., n, 3], n >= 3
+  (a batch of fits at once when there are leading axes)."""
+  mu_s, mu_d = src.mean(-2, keepdims=True), dst.mean(-2, keepdims=True)
+  u, _, vt = np.linalg.svd(np.swapaxes(src - mu_s, -1, -2) @ (dst - mu_d))
+  v, ut = np.swapaxes(vt, -1, -2), np.swapaxes(u, -1, -2)
+  d = np.sign(np.linalg.det(v @ ut))
+  d = np.where(d == 0, 1.0, d)
+  flip = np.ones(d.shape + (3,))
+  flip[..., 2] = d
+  rot = (v * flip[..., None, :]) @ ut
+  t = np.zeros(src.shape[:-2] + (4, 4))
+  t[..., :3, :3] = rot
+  t[..., :3, 3] = mu_d[..., 0, :] - (rot @ mu_s[..., 0, :, None])[..., 0]
+  t[..., 3, 3] = 1.0
   return t
 
 
@@ -136,55 +147,98 @@ def _bucket(n: int, smallest: int = 256) -> int:
   return max(smallest, 1 << (n - 1).bit_length())
 
 
+# Batched numpy scoring holds [batch, C, 3] float64 residuals: 12 MB at 512 x 1,024.
+NUMPY_MAX_CORRESPONDENCES = 1024
+FIRST_BATCH = 32
+
+
+def _numpy_scorer(xyz1: np.ndarray, xyz2: np.ndarray, threshold: float):
+  """samples [B, 3] -> inlier counts [B], as `ransac_sequential` counts them."""
+  def score(samples: np.ndarray) -> np.ndarray:
+    t = kabsch(xyz2[samples], xyz1[samples])                       # [B, 4, 4]
+    d = xyz2 @ np.swapaxes(t[:, :3, :3], -1, -2)                   # [B, C, 3], in place:
+    d += t[:, None, :3, 3]                                         # 3x faster than a norm
+    d -= xyz1
+    d *= d
+    return np.sum(d.sum(-1) < threshold * threshold, axis=1)
+  return score
+
+
+def _jax_scorer(xyz1: np.ndarray, xyz2: np.ndarray, threshold: float, dtype):
+  n, size = len(xyz1), _bucket(len(xyz1))
+  pad = lambda a: jnp.asarray(np.concatenate([a, np.zeros((size - n, 3))]).astype(dtype))
+  x1, x2, valid = pad(xyz1), pad(xyz2), jnp.asarray(np.arange(size) < n)
+
+  def score(samples: np.ndarray) -> np.ndarray:
+    return np.asarray(_inlier_counts(x1, x2, valid, jnp.asarray(samples, jnp.int32),
+                                     threshold=float(threshold)))
+  return score
+
+
 def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
            inlier_threshold: float = 1.0, confidence: float = 0.99, max_trials: int = 10_000,
-           min_trials: int = 10, batch_size: int = 512, x64: bool = True) -> RansacResult:
-  """`ransac_sequential`'s result, scoring `batch_size` hypotheses per jitted call.
+           min_trials: int = 10, batch_size: int = 512, x64: bool = True,
+           backend: str = 'auto') -> RansacResult:
+  """`ransac_sequential`'s result, scoring hypotheses in batches.
 
-  Correspondences are padded to a power-of-two bucket (masked), so clouds with
-  different match counts reuse a few compiled kernels. Batches after the one in
-  which the sequential rule stops are never computed. With `x64` the kernels run
-  in float64, like the reference: in float32 a residual within ~1e-5 m of the
-  threshold may count differently and change the trial count.
+  Batches grow 32, 64, ... up to `batch_size`, and trials after the one at which the
+  sequential rule stops are never scored. `backend`: 'numpy' (batched, no
+  compilation), 'jax' (one jitted call per batch; correspondences padded to a
+  power-of-two bucket and masked) or 'auto' (numpy up to NUMPY_MAX_CORRESPONDENCES
+  matches). With `x64` the JAX kernels run in float64, like the reference: in float32
+  a residual within ~1e-5 m of the threshold may count differently and change the
+  trial count.
   """
-  with jax.enable_x64(x64):
-    return _ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials, min_trials,
-                   batch_size, np.float64 if x64 else np.float32)
-
-
-def _ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials, min_trials,
-            batch_size, dtype) -> RansacResult:
   _check_samples(samples, max_trials)
-  n = len(xyz1)
-  size = _bucket(n)
-  pad = lambda a: np.concatenate([a, np.zeros((size - n, 3))]).astype(dtype)
-  x1, x2 = jnp.asarray(pad(xyz1)), jnp.asarray(pad(xyz2))
-  valid = jnp.asarray(np.arange(size) < n)
-  best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)
-  stop = False
-  while not stop:
-    batch = samples[trials: trials + batch_size]
-    if len(batch) < batch_size:
-      batch = np.concatenate([batch, np.repeat(batch[-1:], batch_size - len(batch), 0)])
-    counts = np.asarray(_inlier_counts(x1, x2, valid, jnp.asarray(batch, jnp.int32),
-                                       threshold=float(inlier_threshold)))
-    for score in counts.tolist():  # replay the sequential rule, trial by trial
-      if not needed > trials:
-        stop = True
-        break
-      if score >= best_score:
-        best_score, best_trial = score, trials
-        needed = _adaptive_trials(score, n, confidence, min_trials)
-      trials += 1
-      if trials > max_trials:
-        stop = True
-        break
-    stop = stop or not needed > trials
-  r, t, inliers = _refit(x1, x2, valid, jnp.asarray(samples[best_trial], jnp.int32),
-                         threshold=float(inlier_threshold))
-  inliers = np.asarray(inliers)[:n]
+  if backend not in ('auto', 'numpy', 'jax'):
+    raise ValueError(f"backend must be 'auto', 'numpy' or 'jax', got {backend!r}")
+  if backend == 'numpy' or (backend == 'auto' and len(xyz1) <= NUMPY_MAX_CORRESPONDENCES):
+    trials, best_trial, best_score = _replay(_numpy_scorer(xyz1, xyz2, inlier_threshold), samples,
+                                             len(xyz1), confidence, max_trials, min_trials,
+                                             batch_size)
+    model = kabsch(xyz2[samples[best_trial]], xyz1[samples[best_trial]])
+    inliers = np.linalg.norm(xyz2 @ model[:3, :3].T + model[:3, 3] - xyz1, axis=1) < inlier_threshold
+    transform = kabsch(xyz2[inliers], xyz1[inliers]) if best_score >= 3 else np.eye(4)
+    return RansacResult(transform, inliers, trials)
+  with jax.enable_x64(x64):
+    dtype = np.float64 if x64 else np.float32
+    trials, best_trial, best_score = _replay(_jax_scorer(xyz1, xyz2, inlier_threshold, dtype),
+                                             samples, len(xyz1), confidence, max_trials,
+                                             min_trials, batch_size)
+    size = _bucket(len(xyz1))
+    pad = lambda a: jnp.asarray(np.concatenate([a, np.zeros((size - len(a), 3))]).astype(dtype))
+    r, t, inliers = _refit(pad(xyz1), pad(xyz2), jnp.asarray(np.arange(size) < len(xyz1)),
+                           jnp.asarray(samples[best_trial], jnp.int32),
+                           threshold=float(inlier_threshold))
+  inliers = np.asarray(inliers)[:len(xyz1)]
   if best_score < 3:
     return RansacResult(np.eye(4), inliers, trials)
   transform = np.eye(4)
   transform[:3, :3], transform[:3, 3] = np.asarray(r, np.float64), np.asarray(t, np.float64)
   return RansacResult(transform, inliers, trials)
+
+
+def _replay(score, samples, n, confidence, max_trials, min_trials, batch_size
+            ) -> tuple[int, int, int]:
+  """The sequential stopping rule over batches of inlier counts from `score`.
+  -> (trials, index of the best trial, its inlier count)."""
+  best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)
+  size, stop = min(FIRST_BATCH, batch_size), False
+  while not stop:
+    batch = samples[trials: trials + size]
+    if len(batch) < size:   # the last batch of the cap: same shape, repeats not replayed
+      batch = np.concatenate([batch, np.repeat(batch[-1:], size - len(batch), 0)])
+    for score_ in score(batch).tolist():
+      if not needed > trials:
+        stop = True
+        break
+      if score_ >= best_score:
+        best_score, best_trial = score_, trials
+        needed = _adaptive_trials(score_, n, confidence, min_trials)
+      trials += 1
+      if trials > max_trials:
+        stop = True
+        break
+    stop = stop or not needed > trials
+    size = min(2 * size, batch_size)
+  return trials, best_trial, best_score
