@@ -4,14 +4,24 @@ r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into clou
         [--keypoints=iss|learned|random] [--descriptor=fpfh|learned|learned,fpfh] \
         [--checkpoint=ours|RUN_DIR|EXPORT_DIR] [--groundtruth=DIR/groundtruths.txt] \
         [--icp] [--json=OUT.json] [--plot=OUT.png]
+    # many pairs in one process: a list of pairs, or the consecutive scans of a folder
+    python -m experiments.register --pairs=PAIRS.txt --out=DIR [--descriptor=learned]
+    python -m experiments.register --sequence=SCANS_DIR --out=DIR [--groundtruth=...]
 
 Reads .bin (N x 3 / 4 / 6 float32 or float64 rows, detected or --format), .npy, .ply, .pcd. Learned
 descriptors and keypoints come from the shipped pretrained models (`ours`, and
 `ours_detector` for learned keypoints) unless --checkpoint names another.
 With --groundtruth (a `groundtruths.txt` listing the pair by the clouds' file
 stems, e.g. 000000.bin / 000001.bin), the errors against it are printed too.
+
+In batch mode each cloud's features are computed once; DIR receives registrations.csv
+(one row per pair: T_12, inliers, RANSAC trials, seconds, errors with --groundtruth),
+written as the pairs complete, and for --sequence poses.txt (each scan's pose in the
+first scan's frame, KITTI's 12 numbers per line) and trajectory.png. PAIRS.txt holds
+"cloud1 cloud2" per line, paths relative to its folder.
 """
 
+import csv
 import json
 import os
 import time
@@ -19,6 +29,7 @@ import time
 from absl import app
 from absl import flags
 import numpy as np
+from tqdm import auto as tqdm
 
 from ssd_jax import cli, geometry, pretrained, viz
 from ssd_jax.data import clean, groundtruth, io
@@ -40,10 +51,15 @@ flags.DEFINE_integer('seed', 0, 'RANSAC / random-keypoint seed.')
 flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m normal / FPFH searches.')
 flags.DEFINE_string('json', None, 'Write the results here.')
 flags.DEFINE_string('plot', None, 'Draw the clouds and inlier matches here (PNG).')
-flags.mark_flags_as_required(['cloud1', 'cloud2'])
+flags.DEFINE_string('pairs', None, 'Batch mode: a file of "cloud1 cloud2" lines.')
+flags.DEFINE_string('sequence', None, 'Batch mode: register each scan of this folder to the '
+                    'next (sorted by name) and chain the poses.')
+flags.DEFINE_string('out', None, 'Batch mode: output folder.')
 
 
-def _ground_truth(path, cloud1, cloud2):
+def _ground_truth(path, cloud1, cloud2, required=True):
+  """T_12 of the pair from a groundtruths.txt, by the clouds' file stems; None when the
+  file does not list the pair and not `required`."""
   stem = lambda p: os.path.splitext(os.path.basename(p))[0]
   try:
     i1, i2 = int(stem(cloud1)), int(stem(cloud2))
@@ -54,6 +70,8 @@ def _ground_truth(path, cloud1, cloud2):
       return pair.transform
     if (pair.idx1, pair.idx2) == (i2, i1):
       return geometry.invert_transform(pair.transform)
+  if not required:
+    return None
   raise SystemExit(f'error: {path} does not list the pair ({i1}, {i2})')
 
 
@@ -70,6 +88,81 @@ def _check_writable(path: str | None) -> None:
     raise ValueError(f'{path}: cannot write a file there')
 
 
+def _read_pairs(path: str) -> list[tuple[str, str]]:
+  """'cloud1 cloud2' lines ('#' comments) -> paths, relative ones from the file's folder."""
+  folder = os.path.dirname(os.path.abspath(path))
+  try:
+    with open(path) as f:
+      lines = [l.split('#')[0].split() for l in f]
+  except OSError as e:
+    raise ValueError(f'--pairs {path}: {e.strerror}') from None
+  pairs = []
+  for n, parts in enumerate(lines, 1):
+    if not parts:
+      continue
+    if len(parts) != 2:
+      raise ValueError(f'{path}, line {n}: expected "cloud1 cloud2", got {" ".join(parts)!r}')
+    pairs.append(tuple(os.path.join(folder, p) for p in parts))
+  if not pairs:
+    raise ValueError(f'--pairs {path}: no pairs listed')
+  return pairs
+
+
+def _batch(descriptor: str, model, checkpoint: str) -> None:
+  """Register every pair of --pairs or consecutive scans of --sequence into --out."""
+  if FLAGS.sequence:
+    scans = [str(p) for p in io.list_clouds(FLAGS.sequence)]
+    if len(scans) < 2:
+      raise ValueError(f'--sequence {FLAGS.sequence}: {len(scans)} cloud(s), 2 or more needed')
+    pairs = list(zip(scans[:-1], scans[1:]))
+  else:
+    pairs = _read_pairs(FLAGS.pairs)
+  os.makedirs(FLAGS.out, exist_ok=True)
+  features, errors = {}, []
+
+  def features_of(path):   # each cloud once (a few kB): scan i serves pairs i-1 and i
+    if path not in features:
+      points = clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
+      features[path] = pipeline.features_anywhere(points, FLAGS.keypoints, descriptor, model,
+                                                  FLAGS.seed, FLAGS.fpfh_max_nn)
+    return features[path]
+
+  transforms = []
+  with open(os.path.join(FLAGS.out, 'registrations.csv'), 'w', newline='') as f:
+    writer = csv.writer(f)
+    writer.writerow(['cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials',
+                     'seconds', *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)],
+                     'rte', 'rre', 'success', 'error'])
+    for cloud1, cloud2 in tqdm.tqdm(pairs, desc='registration', unit='pair'):
+      start = time.perf_counter()
+      f1, f2 = features_of(cloud1), features_of(cloud2)
+      try:
+        reg = pipeline.estimate(f1, f2, FLAGS.seed)
+        t, inliers, trials, error = reg.transform, int(reg.inliers.sum()), reg.trials, ''
+      except ValueError as e:   # too few keypoints: a failed pair, not a failed run
+        t, inliers, trials, error = np.eye(4), 0, 0, str(e)
+      transforms.append(t)
+      errors.append(bool(error))
+      t_gt = _ground_truth(FLAGS.groundtruth, cloud1, cloud2, False) if FLAGS.groundtruth else None
+      gt = metrics.registration_errors(t_gt, t) if t_gt is not None else {}
+      writer.writerow([cloud1, cloud2, len(f1.xyz), len(f2.xyz), inliers, trials,
+                       f'{time.perf_counter() - start:.3f}', *t.ravel().tolist(),
+                       gt.get('rte', ''), gt.get('rre', ''), gt.get('success', ''), error])
+      f.flush()   # a stopped run keeps the pairs it registered
+  print(f'wrote {os.path.join(FLAGS.out, "registrations.csv")}: {len(pairs)} pairs, '
+        f'{descriptor} descriptors ({checkpoint if descriptor == "learned" else "Open3D"}), '
+        f'{sum(errors)} without enough keypoints')
+  if FLAGS.sequence:
+    poses = [np.eye(4)]
+    for t in transforms:   # T_{i,i+1} maps scan i+1 into scan i: P_{i+1} = P_i T_{i,i+1}
+      poses.append(poses[-1] @ t)
+    poses = np.stack(poses)
+    np.savetxt(os.path.join(FLAGS.out, 'poses.txt'), poses[:, :3, :].reshape(len(poses), 12))
+    viz.plot_trajectory(poses, os.path.join(FLAGS.out, 'trajectory.png'),
+                        f'{len(scans)} scans of {FLAGS.sequence}', np.asarray(errors))
+    print(f'wrote {os.path.join(FLAGS.out, "poses.txt")} and trajectory.png')
+
+
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
@@ -77,10 +170,25 @@ def main(argv):
   bad = [d for d in FLAGS.descriptor if d not in pipeline.DESCRIPTORS]
   if bad:
     raise SystemExit(f'error: --descriptor must be among {pipeline.DESCRIPTORS}, got {bad}')
+  batch = bool(FLAGS.pairs or FLAGS.sequence)
+  if batch and (FLAGS.cloud1 or FLAGS.cloud2 or FLAGS.json or FLAGS.plot or FLAGS.icp
+                or not FLAGS.out or bool(FLAGS.pairs) == bool(FLAGS.sequence)
+                or len(FLAGS.descriptor) != 1):
+    raise SystemExit('error: batch mode takes one of --pairs / --sequence, --out and one '
+                     '--descriptor (not --cloud1/--cloud2/--json/--plot/--icp)')
+  if not batch and not (FLAGS.cloud1 and FLAGS.cloud2):
+    raise SystemExit('error: give --cloud1 and --cloud2 (or --pairs / --sequence with --out)')
   needs_model = 'learned' in FLAGS.descriptor or FLAGS.keypoints == 'learned'
   # The shipped descriptor model's attention is untrained; learned keypoints need the
   # shipped self-supervised detector.
   checkpoint = FLAGS.checkpoint or ('ours_detector' if FLAGS.keypoints == 'learned' else 'ours')
+  if batch:
+    try:
+      _batch(FLAGS.descriptor[0], pretrained.load(checkpoint) if needs_model else None,
+             checkpoint)
+    except (io.CloudFileError, clean.CloudDataError, FileNotFoundError, ValueError) as e:
+      raise SystemExit(f'error: {e}') from None
+    return
   try:
     for out_path in (FLAGS.json, FLAGS.plot):
       _check_writable(out_path)

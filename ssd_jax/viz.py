@@ -208,3 +208,28 @@ def plot_rotation_sweep(sweeps: dict, path: str | os.PathLike) -> None:
     ax.legend(fontsize=8)
   fig.savefig(path, dpi=120, bbox_inches='tight')
   plt.close(fig)
+
+
+def plot_trajectory(poses: np.ndarray, path: str | os.PathLike, title: str = '',
+                    failed: np.ndarray | None = None) -> None:
+  """Top view of a trajectory: poses [S, 4, 4] of each scan in the first scan's frame
+  (metres); `failed` [S - 1] bool marks the steps whose registration failed (red)."""
+  plt = _pyplot()
+  xy = poses[:, :2, 3]
+  fig, ax = plt.subplots(figsize=(6.5, 6))
+  ax.plot(xy[:, 0], xy[:, 1], '-', color='0.6', lw=1)
+  ax.scatter(xy[:, 0], xy[:, 1], s=8, c=np.arange(len(xy)), cmap='viridis', zorder=3,
+             label='scan positions (colour: index)')
+  if failed is not None and np.any(failed):
+    bad = np.flatnonzero(failed) + 1
+    ax.scatter(xy[bad, 0], xy[bad, 1], s=30, facecolors='none', edgecolors='r', zorder=4,
+               label='registration to the previous scan failed')
+  ax.plot(xy[:1, 0], xy[:1, 1], 'k^', ms=8, label='first scan')
+  ax.set_aspect('equal', adjustable='datalim')
+  ax.set_xlabel('x (m)')
+  ax.set_ylabel('y (m)')
+  ax.set_title(title or f'{len(poses)} scans')
+  ax.legend(loc='best', fontsize=8)
+  fig.tight_layout()
+  fig.savefig(path, dpi=120)
+  plt.close(fig)

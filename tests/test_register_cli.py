@@ -1,5 +1,6 @@
 """Registration entry points on a tiny synthetic set: readers, register, evaluate."""
 
+import csv
 import json
 import os
 import subprocess
@@ -217,3 +218,39 @@ def test_the_compilation_cache_keeps_kernels_and_changes_no_result(tiny_set, tmp
       assert len(kept) >= 2, kept   # the descriptor network's kernels, at least
   assert sorted(p.name for p in (tmp_path / 'cache').iterdir()) == kept   # loaded, not rebuilt
   assert results[0]['T_12'] == results[1]['T_12'] == results[2]['T_12']
+
+
+def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
+  folder = tiny_set / 'test_kitti' / '00'
+  scans = sorted(folder.glob('*.bin'))[:4]
+  seq = tmp_path / 'scans'
+  seq.mkdir()
+  for p in scans:
+    (seq / p.name).write_bytes(p.read_bytes())
+  out = _run('experiments.register', f'--sequence={seq}', f'--out={tmp_path / "seq"}',
+             f'--groundtruth={folder / "groundtruths.txt"}', '--fpfh_max_nn=200')
+  assert out.returncode == 0, out.stderr[-3000:]
+  rows = list(csv.DictReader((tmp_path / 'seq' / 'registrations.csv').open()))
+  assert [(r['cloud1'], r['cloud2']) for r in rows] == [
+      (str(a), str(b)) for a, b in zip(sorted(seq.glob('*.bin'))[:-1], sorted(seq.glob('*.bin'))[1:])]
+  poses = np.loadtxt(tmp_path / 'seq' / 'poses.txt').reshape(-1, 3, 4)
+  assert poses.shape == (4, 3, 4)
+  np.testing.assert_allclose(poses[0], np.eye(4)[:3])
+  t01 = np.array([float(rows[0][f'T_12[{i}][{j}]']) for i in range(4) for j in range(4)])
+  np.testing.assert_allclose(poses[1], t01.reshape(4, 4)[:3])   # P_1 = P_0 T_01
+  listed = benchmarks.read_registration_set(folder)[0]            # the ground truth lists it
+  assert rows[0]['success'] == ('True' if listed.idx2 == 1 else '')
+  assert (tmp_path / 'seq' / 'trajectory.png').stat().st_size > 10_000
+  # A pair list: paths relative to the list; a malformed line is one line of error.
+  (tmp_path / 'pairs.txt').write_text(f'# first pair\n{listed.cloud1} {listed.cloud2}\n')
+  out = _run('experiments.register', f'--pairs={tmp_path / "pairs.txt"}',
+             f'--out={tmp_path / "list"}', f'--groundtruth={folder / "groundtruths.txt"}',
+             '--fpfh_max_nn=200')
+  assert out.returncode == 0, out.stderr[-3000:]
+  (row,) = csv.DictReader((tmp_path / 'list' / 'registrations.csv').open())
+  assert row['success'] == 'True' and int(row['inliers']) >= 3
+  (tmp_path / 'bad.txt').write_text('a.bin b.bin c.bin\n')
+  out = _run('experiments.register', f'--pairs={tmp_path / "bad.txt"}', f'--out={tmp_path / "x"}')
+  assert out.returncode == 1
+  assert out.stderr.strip().splitlines()[-1] == (
+      f"error: {tmp_path / 'bad.txt'}, line 1: expected \"cloud1 cloud2\", got 'a.bin b.bin c.bin'")

@@ -111,6 +111,31 @@ def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_thresho
                       res.trials, {'matching': t1 - t0, 'ransac': t2 - t1})
 
 
+def local_origin(*clouds: np.ndarray) -> np.ndarray:
+  """[3] float64: zero when float32 resolves every point of `clouds` ([N, 3] float64
+  metres) to clean.MAX_RESOLUTION, else the first cloud's centroid, the origin to
+  compute features around."""
+  reach = max(float(np.max(np.abs(c))) for c in clouds)
+  if np.spacing(np.float32(reach)) <= clean.MAX_RESOLUTION:
+    return np.zeros(3)
+  return clouds[0].mean(axis=0)
+
+
+def features_anywhere(points: np.ndarray, keypoints: str = 'iss', descriptor: str = 'fpfh',
+                      model=None, seed: int = 0,
+                      fpfh_max_nn: int = features.FPFH_MAX_NN) -> CloudFeatures:
+  """`cloud_features` of one cloud [N, 3] in any coordinates (float64 metres, e.g. UTM):
+  computed around `local_origin(points)`, keypoints returned in the input coordinates
+  as float64. Features of each cloud once, for registering many pairs (`estimate`
+  then works in the input coordinates, in float64)."""
+  points = check_cloud(points, dtype=np.float64)
+  offset = local_origin(points)
+  f = cloud_features(check_cloud(points - offset), keypoints, descriptor, model, seed,
+                     fpfh_max_nn)
+  f.xyz = f.xyz.astype(np.float64) + offset
+  return f
+
+
 def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
              descriptor: str = 'fpfh', model=None, seed: int = 0,
              fpfh_max_nn: int = features.FPFH_MAX_NN, icp: bool = False,
@@ -127,9 +152,7 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
   """
   clouds = [check_cloud(p, name, np.float64) for p, name in ((points1, 'cloud 1'),
                                                              (points2, 'cloud 2'))]
-  reach = max(float(np.max(np.abs(c))) for c in clouds)
-  near = np.spacing(np.float32(reach)) <= clean.MAX_RESOLUTION
-  offset = np.zeros(3) if near else clouds[0].mean(axis=0)
+  offset = local_origin(clouds[0], clouds[1])
   local = [check_cloud(c - offset, name) for c, name in zip(clouds, ('cloud 1', 'cloud 2'))]
   f1, f2 = (cloud_features(c, keypoints, descriptor, model, seed, fpfh_max_nn) for c in local)
   reg = estimate(f1, f2, seed)
