@@ -79,22 +79,27 @@ def _read(path) -> np.ndarray:
   return clean.clean_cloud(io.read_cloud(path), str(path), np.float64)
 
 
-def _project(method: str, model):
+def _runner(method: str, model):
+  """-> run(path1, path2, cache, seed) -> (T_12, {stage: seconds}). The project's methods
+  keep each cloud's features in `cache` ({path: features}) unless it is None."""
+  if method.startswith('Open3D'):
+    return lambda path1, path2, cache, seed: open3d_register(_read(path1), _read(path2), seed)
   descriptor = 'learned' if 'learned' in method else 'fpfh'
 
-  def run(points1, points2, cache=None, keys=(None, None), seed=0):
-    feats = []
-    for points, key in zip((points1, points2), keys):
-      if cache is not None and key in cache:
-        feats.append(cache[key])
-        continue
-      f = pipeline.features_anywhere(points, 'iss', descriptor, model, seed, FLAGS.fpfh_max_nn)
-      if cache is not None:
-        cache[key] = f
-      feats.append(f)
-    reg = pipeline.estimate(feats[0], feats[1], seed)
-    return reg.transform, {'features': sum(sum(f.seconds.values()) for f in feats)
-                           if cache is None else None, **reg.seconds}
+  def features_of(path, cache, seed):
+    if cache is not None and path in cache:
+      return cache[path]
+    f = pipeline.features_anywhere(_read(path), 'iss', descriptor, model, seed, FLAGS.fpfh_max_nn)
+    if cache is not None:
+      cache[path] = f
+    return f
+
+  def run(path1, path2, cache, seed):
+    t0 = time.perf_counter()
+    f1, f2 = features_of(path1, cache, seed), features_of(path2, cache, seed)
+    features_s = time.perf_counter() - t0
+    reg = pipeline.estimate(f1, f2, seed)
+    return reg.transform, {'features': features_s, **reg.seconds}
   return run
 
 
@@ -127,33 +132,25 @@ def main(argv):
   if len(pairs) < 2:
     raise SystemExit(f'error: {FLAGS.dataset} has {len(pairs)} pair(s); 2 or more needed')
   model = pretrained.load('ours')
-  runners = {m: (_project(m, model) if m.startswith('project') else
-                 lambda p1, p2, cache=None, keys=None, seed=0: open3d_register(p1, p2, seed))
-             for m in METHODS}
   rows = []
   for method in METHODS:
     _cold(method, pairs[0])   # fills the compilation cache, as any earlier use would
     cold = [_cold(method, p) for p in pairs[:FLAGS.cold_pairs]]
     rows.append((method, 'cold: 1 pair, new process', len(cold), {'total': np.mean(cold)}, None))
-    run = runners[method]
-    run(_read(pairs[1].cloud1), _read(pairs[1].cloud2))   # warm up on another pair
-    p1, p2 = _read(pairs[0].cloud1), _read(pairs[0].cloud2)
+    run = _runner(method, model)
+    run(pairs[1].cloud1, pairs[1].cloud2, None, 0)   # warm up on another pair
     t0 = time.perf_counter()
-    t, stages = run(p1, p2)
+    t, stages = run(pairs[0].cloud1, pairs[0].cloud2, None, 0)
     stages['total'] = time.perf_counter() - t0
     rows.append((method, 'warm: 1 pair', 1, stages,
                  metrics.registration_errors(pairs[0].transform, t)['success']))
-    cache, totals, success = {}, [], []
-    t_batch = time.perf_counter()
+    cache, success = {}, []
+    t0 = time.perf_counter()
     for n, pair in enumerate(tqdm.tqdm(pairs, desc=method, unit='pair')):
-      t0 = time.perf_counter()
-      keys = (str(pair.cloud1), str(pair.cloud2))
-      t, _ = (run(_read(pair.cloud1), _read(pair.cloud2), cache, keys, n)
-              if method.startswith('project') else run(_read(pair.cloud1), _read(pair.cloud2), seed=n))
-      totals.append(time.perf_counter() - t0)
+      t, _ = run(pair.cloud1, pair.cloud2, cache, n)
       success.append(metrics.registration_errors(pair.transform, t)['success'])
     rows.append((method, f'batch: {len(pairs)} pairs, one process', len(pairs),
-                 {'total': (time.perf_counter() - t_batch) / len(pairs)}, float(np.mean(success))))
+                 {'total': (time.perf_counter() - t0) / len(pairs)}, float(np.mean(success))))
   print(f'\n{FLAGS.dataset}; seconds per pair (mean)\n')
   print('| method | regime | pairs | features | matching | RANSAC | total | success |')
   print('|---|---|---|---|---|---|---|---|')

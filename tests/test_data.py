@@ -1,6 +1,7 @@
 import numpy as np
 import open3d as o3d
 import pytest
+from scipy import stats
 
 from ssd_jax.data import clean, datasets, io
 from tests.conftest import shared_path
@@ -195,3 +196,12 @@ def test_dataset_refuses_clouds_far_from_their_sensor(tmp_path):
 
 def test_prefetch_preserves_order():
   assert list(datasets.prefetch(lambda s: s * s, range(3, 12), depth=3)) == [s * s for s in range(3, 12)]
+
+
+def test_ks_statistic_equals_scipys():
+  # scipy.stats is the reference; the library avoids importing it.
+  rng = np.random.default_rng(0)
+  for a, b in [(rng.normal(size=300), rng.normal(size=500)),
+               (rng.uniform(0, 255, 400), rng.normal(0, 20, 900)),
+               (np.array([1.0, 1.0, 2.0]), np.array([1.0, 3.0]))]:
+    assert io.ks_statistic(a, b) == pytest.approx(stats.ks_2samp(a, b).statistic, abs=1e-12)

@@ -18,7 +18,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 # .bin row layouts: name -> (little-endian dtype, columns). The first three columns are
 # x y z in metres; `i` is an intensity / reflectance, `n` a unit normal.
@@ -87,9 +86,19 @@ def _layout_problem(rows: np.ndarray, fmt: str) -> str | None:
               'intensity')
     # An N x 3 file read 4 columns wide puts coordinates in column 4: it is then
     # distributed like the coordinates, which an intensity never is.
-    if stats.ks_2samp(value, xyz.ravel()).statistic < 0.1:
+    if ks_statistic(value, xyz.ravel()) < 0.1:
       return 'column 4 is distributed like the coordinates, not like an intensity'
   return None
+
+
+def ks_statistic(a: np.ndarray, b: np.ndarray) -> float:
+  """The two-sample Kolmogorov-Smirnov statistic: the largest gap between the empirical
+  CDFs of samples a [n] and b [m] (scipy.stats.ks_2samp's, without importing
+  scipy.stats, a second of every command's start)."""
+  a, b = np.sort(np.ravel(a)), np.sort(np.ravel(b))
+  grid = np.concatenate([a, b])
+  return float(np.max(np.abs(np.searchsorted(a, grid, side='right') / len(a)
+                             - np.searchsorted(b, grid, side='right') / len(b))))
 
 
 def _sample_rows(data: np.ndarray, fmt: str) -> np.ndarray | None:
