@@ -13,7 +13,7 @@ from scipy import spatial
 
 from ssd_jax import geometry
 from ssd_jax.data import datasets, groundtruth, io
-from ssd_jax.synthetic import dataset, lidar, realism, scene as scene_lib
+from ssd_jax.synthetic import dataset, lidar, pushbroom, realism, scene as scene_lib
 from tests.conftest import shared_path, tiny_synthetic_config as tiny_config
 
 
@@ -280,3 +280,44 @@ def test_realism_table_puts_synthetic_and_real_scans_side_by_side(synthetic_root
   assert stats['synthetic processed (0.2 m voxels)']['points per scan'] == pytest.approx(
       np.mean(counts))
   assert len(md.splitlines()) == 2 + len(stats['synthetic raw (front crop)'])
+
+
+def test_pushbroom_lines_on_a_known_street():
+  """Ground z = 0 and a wall at y = 5 m, a perfect line scanner 2 m up driven along x:
+  one line of returns per pose, across the street, each ray where geometry puts it."""
+  ground = np.array([[-100, -100, 0], [100, -100, 0], [100, 100, 0], [-100, 100, 0]], np.float32)
+  wall = np.array([[-100, 5, -1], [100, 5, -1], [100, 5, 100], [-100, 5, 100]], np.float32)
+  quad = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
+  street = scene_lib.Scene(None, None, 0.0,
+                           {scene_lib.Label.GROUND: ground, scene_lib.Label.BUILDING: wall},
+                           {scene_lib.Label.GROUND: quad, scene_lib.Label.BUILDING: quad})
+  model = pushbroom.PushbroomModel(range_noise=0.0, dropout=0.0, angular_step=1.0)
+  xs = np.arange(0.0, 10.01, 0.5)
+  poses = np.tile(np.eye(4), (len(xs), 1, 1))
+  poses[:, 0, 3], poses[:, 2, 3] = xs, 2.0
+  pts, labels, lines = pushbroom.accumulate(lidar.Raycaster(street), poses, model,
+                                            np.random.default_rng(0))
+  np.testing.assert_allclose(pts[:, 0], xs[lines], atol=1e-4)   # lines across the street
+  assert sorted(set(lines.tolist())) == list(range(len(xs)))
+  on_ground = labels == scene_lib.Label.GROUND
+  np.testing.assert_allclose(pts[on_ground, 2], 0.0, atol=1e-4)
+  np.testing.assert_allclose(pts[~on_ground, 1], 5.0, atol=1e-4)
+  # Per line, the count the geometry predicts: a ray down (cos a > 0) meets the ground
+  # at y = 2 tan a unless the wall comes first; a ray towards +y meets the wall at range
+  # 5 / sin a; anything beyond 50 m or into the sky is lost.
+  a = model.angles()
+  t_ground = np.where(np.cos(a) > 1e-9, 2.0 / np.maximum(np.cos(a), 1e-9), np.inf)
+  t_wall = np.where(np.sin(a) > 1e-9, 5.0 / np.maximum(np.sin(a), 1e-9), np.inf)
+  t = np.minimum(t_ground, t_wall)
+  hits = (t >= model.min_range) & (t <= model.max_range)
+  expected_wall = int((hits & (t_wall < t_ground)).sum())
+  assert np.bincount(lines).tolist() == [int(hits.sum())] * len(xs)
+  assert np.bincount(lines[~on_ground]).tolist() == [expected_wall] * len(xs)
+  # A pose the vehicle misreports by 0.1 m sideways moves its line by 0.1 m, nothing else.
+  moved = poses.copy()
+  moved[:, 1, 3] += 0.1
+  shifted, _, _ = pushbroom.accumulate(lidar.Raycaster(street), poses, model,
+                                       np.random.default_rng(0), reported_poses=moved)
+  np.testing.assert_allclose(shifted - pts, np.broadcast_to([0, 0.1, 0], pts.shape), atol=1e-6)
+  with pytest.raises(ValueError, match='angular_step'):
+    pushbroom.PushbroomModel(angular_step=0.0)
