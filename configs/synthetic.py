@@ -67,6 +67,11 @@ def get_config() -> ml_collections.ConfigDict:
   # The largest grid <= this (5 % steps) giving >= num_points distinct points in the crop,
   # then a random subset: real models have a near-regular 0.2 m spacing and no repeats.
   oxford.voxel_size = 0.2
+  # 'spinning': one HDL-64 scan cropped to crop_radius; 'pushbroom': a 2D line scanner's
+  # lines accumulated over 2 crop_radius metres of one pass, every line_spacing metres
+  # (ssd_jax/synthetic/pushbroom.py), as RobotCar's test models were made.
+  oxford.sensor = 'spinning'
+  oxford.line_spacing = 0.2
 
   # Descriptor-matching cluster pairs (docs/method.md §4).
   config.clusters = clusters = ml_collections.ConfigDict()

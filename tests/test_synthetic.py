@@ -167,6 +167,30 @@ def test_oxford_style_models(tiny_set):
   assert np.std(yaws) > 20
 
 
+def test_pushbroom_oxford_models_overlap_under_their_ground_truth(tmp_path):
+  config = tiny_config()
+  config.train.num_scenes = config.clusters.num_scenes = 0
+  config.test_oxford.sensor = 'pushbroom'
+  config.test_oxford.crop_radius = 15.0    # the tiny scene is 80 m long
+  config.test_oxford.spacing = 5.0
+  dataset.generate(config, tmp_path / 'pb')
+  root = tmp_path / 'pb' / 'test_oxford'
+  pairs = groundtruth.read_groundtruths(root / 'groundtruths.txt')
+  assert len(pairs) >= 3
+  for p in pairs:
+    c1, c2 = (io.read_cloud(root / 'test_models' / f'{i}.bin') for i in (p.idx1, p.idx2))
+    assert c1.shape == c2.shape == (4096, 3) and len(np.unique(c1, axis=0)) == len(c1)
+    assert _overlap(c1, c2, p.transform) >= 0.4   # as test_oxford_style_models asks
+  # A 5 degree yaw error in the ground truth loses overlap.
+  c1, c2 = (io.read_cloud(root / 'test_models' / f'{i}.bin') for i in (pairs[0].idx1, pairs[0].idx2))
+  wrong = geometry.make_transform(geometry.rotation_z(np.radians(5.0)), np.zeros(3)) @ pairs[0].transform
+  assert _overlap(c1, c2, wrong) < _overlap(c1, c2, pairs[0].transform) - 0.1
+  bad = tiny_config()
+  bad.test_oxford.sensor = 'spinnning'
+  with pytest.raises(dataset.SyntheticConfigError, match="test_oxford.sensor must be one of"):
+    dataset.check_config(bad)
+
+
 def test_training_folder_reads_as_oxford_index(tiny_set):
   entries = io.read_oxford_index(tiny_set / 'train' / 'train.txt')
   poses = np.loadtxt(tiny_set / 'train' / '00' / 'poses.txt').reshape(-1, 3, 4)

@@ -34,13 +34,15 @@ from scipy import spatial
 from ssd_jax import geometry
 from ssd_jax.data import datasets, groundtruth, io, kitti, preprocess
 from ssd_jax.registration import keypoints
-from ssd_jax.synthetic import lidar, scene as scene_lib, trajectory
+from ssd_jax.synthetic import lidar, pushbroom, scene as scene_lib, trajectory
 
 SPLITS = {'train': 1, 'test_kitti': 2, 'test_oxford': 3, 'clusters': 4}
 MANIFEST = 'synthetic.json'
 # Sub-streams of a drive's seed (seed, split, scene): scan k uses 1 + k.
 _CALIBRATION_STREAM = 0
 _MODEL_ROTATION_STREAM = 1 << 30
+_PUSHBROOM_STREAM = (1 << 30) + 1
+OXFORD_SENSORS = ('spinning', 'pushbroom')
 FORMAT_VERSION = 1
 
 
@@ -64,6 +66,10 @@ def check_config(config) -> None:
   positive('normal_radius', config.normal_radius)
   positive('test_oxford.num_points', config.test_oxford.num_points)
   positive('test_oxford.voxel_size', config.test_oxford.voxel_size, allow_zero=True)
+  if config.test_oxford.get('sensor', 'spinning') not in OXFORD_SENSORS:
+    raise SyntheticConfigError(f'test_oxford.sensor must be one of {OXFORD_SENSORS}, got '
+                               f'{config.test_oxford.sensor!r}')
+  positive('test_oxford.line_spacing', config.test_oxford.get('line_spacing', 0.2))
   positive('clusters.num_pairs', config.clusters.num_pairs, allow_zero=True)
   if config.clusters.centers not in ('random', 'iss'):
     raise SyntheticConfigError(f"clusters.centers must be 'random' or 'iss', got "
@@ -198,8 +204,63 @@ def _model_voxel_size(raw: np.ndarray, cfg) -> float:
   return voxel
 
 
+def _write_oxford_model(config, path: Path, points: np.ndarray, normals: np.ndarray,
+                        rng: np.random.Generator, index: int) -> np.ndarray:
+  """Write one Oxford-style model: a random subset of num_points rows of points [M, 3]
+  and normals, turned by a random yaw. -> the yaw's rotation [3, 3] (model <- input)."""
+  cfg = config.test_oxford
+  if len(points) < cfg.num_points:   # would repeat points, which real models never do
+    logging.warning('test_oxford model %d: only %d points within %.0f m, fewer than %d; '
+                    'some are repeated', index, len(points), cfg.crop_radius, cfg.num_points)
+  keep = np.sort(datasets.subsample_indices(rng, len(points), cfg.num_points))
+  rot = geometry.rotation_z(rng.uniform(-np.pi, np.pi))
+  io.write_bin(path, points[keep] @ rot.T, normals[keep] @ rot.T)
+  return rot
+
+
+def _write_test_oxford_pushbroom(config, out: Path, tick) -> int:
+  """Oxford test models as RobotCar's: a line scanner's lines accumulated over
+  2 crop_radius metres of one traversal (`pushbroom`), a model every `spacing` metres of
+  each of the two passes down the street, pairs within pair_max_distance."""
+  cfg, idx0, all_pairs = config.test_oxford, 0, []
+  folder = out / 'test_oxford' / 'test_models'
+  folder.mkdir(parents=True)
+  sensor = pushbroom.PushbroomModel()
+  stride = max(1, int(round(cfg.spacing / cfg.line_spacing)))
+  for seq in range(cfg.num_scenes):
+    seed, scene, _ = _scene_and_poses(config, 'test_oxford', seq)
+    rng = np.random.default_rng((*seed, _PUSHBROOM_STREAM))
+    true, reported, leg = pushbroom.line_poses(scene, rng, cfg.line_spacing,
+                                               config.lidar.mount_height)
+    points, _, lines = pushbroom.accumulate(lidar.Raycaster(scene), true, sensor, rng, reported)
+    rot_rng = np.random.default_rng((*seed, _MODEL_ROTATION_STREAM))
+    xyz, frames = reported[:, :3, 3], []
+    for side in (0, 1):
+      idx = np.flatnonzero(leg == side)
+      travelled = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(xyz[idx], axis=0), axis=1))])
+      full = (travelled >= cfg.crop_radius) & (travelled <= travelled[-1] - cfg.crop_radius)
+      for c in idx[full][::stride]:   # whole submaps only
+        sub = pushbroom.submap(points, lines, xyz, leg, c, cfg.crop_radius)
+        # In the frame the vehicle reported at the centre line, as the real models are.
+        local = (sub - reported[c, :3, 3]) @ reported[c, :3, :3]
+        pts, normals = process(config, local.astype(np.float32), cfg.voxel_size)
+        rot = _write_oxford_model(config, folder / f'{idx0 + len(frames)}.bin', pts, normals,
+                                  rot_rng, idx0 + len(frames))
+        frames.append(reported[c] @ geometry.make_transform(rot.T, np.zeros(3)))
+        tick()
+    frames = np.stack(frames)
+    all_pairs += [groundtruth.GroundTruthPair(idx0 + i, idx0 + j, groundtruth.relative_pose(frames, i, j))
+                  for i, j in groundtruth.close_pairs(frames[:, :3, 3], cfg.pair_max_distance)]
+    idx0 += len(frames)
+  if all_pairs:
+    groundtruth.write_groundtruths(out / 'test_oxford' / 'groundtruths.txt', all_pairs)
+  return len(all_pairs)
+
+
 def _write_test_oxford(config, out: Path, tick) -> int:
   """Oxford test models: cropped, a fixed point count, each in a random z-rotated frame."""
+  if config.test_oxford.get('sensor', 'spinning') == 'pushbroom':
+    return _write_test_oxford_pushbroom(config, out, tick)
   cfg, idx0, all_pairs = config.test_oxford, 0, []
   folder = out / 'test_oxford' / 'test_models'
   folder.mkdir(parents=True)
@@ -211,13 +272,8 @@ def _write_test_oxford(config, out: Path, tick) -> int:
       raw = drive.scan(k)
       raw = raw[np.linalg.norm(raw[:, :2], axis=1) < cfg.crop_radius]
       points, normals = process(config, raw, _model_voxel_size(raw, cfg))
-      if len(points) < cfg.num_points:   # would repeat points, which real models never do
-        logging.warning('test_oxford model %d: only %d points within %.0f m, fewer than %d; '
-                        'some are repeated', idx0 + k, len(points), cfg.crop_radius,
-                        cfg.num_points)
-      keep = np.sort(datasets.subsample_indices(rng, len(points), cfg.num_points))
-      rot = geometry.rotation_z(rng.uniform(-np.pi, np.pi))
-      io.write_bin(folder / f'{idx0 + k}.bin', points[keep] @ rot.T, normals[keep] @ rot.T)
+      rot = _write_oxford_model(config, folder / f'{idx0 + k}.bin', points, normals, rng,
+                                idx0 + k)
       frames.append(drive.poses[k] @ geometry.make_transform(rot.T, np.zeros(3)))
       tick()
     frames = np.stack(frames)
@@ -350,7 +406,8 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
 
 # Config keys added after datasets were written, with the value those datasets used:
 # a dataset written before a key existed is reused when the config keeps that value.
-ADDED_KEYS = {('test_kitti', 'random_yaw'): False}
+ADDED_KEYS = {('test_kitti', 'random_yaw'): False, ('test_oxford', 'sensor'): 'spinning',
+              ('test_oxford', 'line_spacing'): 0.2}
 
 
 def _with_added_keys(settings: dict) -> dict:

@@ -15,6 +15,7 @@ import dataclasses
 
 import numpy as np
 
+from ssd_jax.synthetic import trajectory
 from ssd_jax.synthetic.lidar import Raycaster
 from ssd_jax.synthetic.scene import Label
 
@@ -85,3 +86,38 @@ def accumulate(raycaster: Raycaster, true_poses: np.ndarray, model: PushbroomMod
     labels.append(label[keep].astype(np.int8))
     lines.append(np.full(int(keep.sum()), k, np.int32))
   return np.concatenate(pts), np.concatenate(labels), np.concatenate(lines)
+
+
+def line_poses(scene, rng: np.random.Generator, line_spacing: float, mount_height: float,
+               drift_m: float = 0.02, drift_deg: float = 0.05
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+  """The poses of every scan line of a drive down the street and back in the other lane
+  (a second traversal of each place): one every `line_spacing` metres, following the
+  lane smoothly (a car does not yaw from one 20 ms line to the next).
+
+  -> (true [L, 4, 4], reported [L, 4, 4] T_world_sensor, leg [L] int: 0 down the
+  street, 1 back): the reported poses drift from the true ones by a random walk that
+  reaches about `drift_m` metres and `drift_deg` degrees of yaw per 60 m, as an INS
+  between corrections does.
+  """
+  true = trajectory.drive(scene, rng, line_spacing, mount_height, weave=0.0,
+                          yaw_noise_deg=0.0, tilt_noise_deg=0.0)
+  steps = max(1.0, 60.0 / line_spacing)
+  walk = lambda scale, shape: np.cumsum(rng.standard_normal(shape), 0) * scale / np.sqrt(steps)
+  reported = true.copy()
+  reported[:, :3, 3] += walk(drift_m, (len(true), 3))
+  yaw = walk(np.radians(drift_deg), len(true))
+  reported[:, :3, :3] = trajectory.rotation_zyx(yaw, np.zeros_like(yaw),
+                                                np.zeros_like(yaw)) @ true[:, :3, :3]
+  leg = (true[:, :3, 0] @ true[0, :3, 0] < 0).astype(np.int64)   # heading turned around
+  return true, reported, leg
+
+
+def submap(points: np.ndarray, lines: np.ndarray, line_xyz: np.ndarray, leg: np.ndarray,
+           centre: int, radius: float) -> np.ndarray:
+  """The points [M, 3] of the lines of `centre`'s traversal (`leg`) whose pose lies
+  within `radius` metres (in the plane) of line `centre`'s: ~2 radius metres of one
+  pass down the street."""
+  near = ((np.linalg.norm(line_xyz[:, :2] - line_xyz[centre, :2], axis=1) <= radius)
+          & (leg == leg[centre]))
+  return points[near[lines]]
