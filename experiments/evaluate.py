@@ -18,7 +18,6 @@ import sys
 
 from absl import app
 from absl import flags
-import jax
 
 from ssd_jax import cli, distributed
 from ssd_jax.evaluation import evaluators
@@ -37,15 +36,15 @@ def main(argv):
   quiet_libraries()
   cli.initialize_distributed()
   command = 'python -m experiments.evaluate ' + shlex.join(sys.argv[1:])
-  try:   # bad rows or types, missing, truncated or degenerate data: one line, no traceback
+  try:
     path, text = evaluators.evaluate(FLAGS.config, FLAGS.workdir, command)
-  except ValueError as e:
-    raise SystemExit(f'error: {e}') from None
-  except jax.errors.JaxRuntimeError as e:
-    if jax.process_count() == 1:
-      raise
-    distributed.fail(f'gathering results from the other processes failed '
-                     f'({str(e).splitlines()[0][:200]}): another process probably stopped')
+  except Exception as e:  # pylint: disable=broad-except
+    if distributed.is_peer_failure(e):   # first: a collective may raise it as a ValueError
+      distributed.fail(f'gathering results from the other processes failed '
+                       f'({str(e).splitlines()[0][:200]}): another process probably stopped')
+    if isinstance(e, ValueError):   # bad rows or types, missing, truncated or degenerate data
+      raise SystemExit(f'error: {e}') from None
+    raise
   if distributed.is_main():
     print(text)
     print(f'\nwrote {path}')

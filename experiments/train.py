@@ -52,10 +52,11 @@ def main(argv):
   except (config_checks.ConfigError, clean.CloudDataError, train.TrainingDiverged,
           checkpoint.CheckpointError) as e:
     raise SystemExit(f'error: {e}') from None
-  except jax.errors.JaxRuntimeError as e:
-    if jax.process_count() == 1:
+  except Exception as e:  # pylint: disable=broad-except
+    if not distributed.is_peer_failure(e):
       raise
-    # A collective whose peer is gone (gloo: "Connection reset by peer"; NCCL alike).
+    # A collective whose peer is gone (gloo: "Connection reset by peer"; NCCL alike), in
+    # a step, an orbax save or a gather.
     distributed.fail(f'a step with the other processes failed ({str(e).splitlines()[0][:200]}): '
                      f'another process probably stopped; {distributed.STOPPED_HINT}')
 

@@ -144,6 +144,21 @@ STOPPED_HINT = ('every process stops. Rerun all of them with the same --workdir:
                 'resumes from its last checkpoint')
 
 
+# What a collective or a coordination call says when its peer process is gone.
+_PEER_FAILURE = ('Gloo', 'NCCL', 'Connection reset', 'Connection closed', 'DEADLINE_EXCEEDED',
+                 'UNAVAILABLE', 'heartbeat')
+
+
+def is_peer_failure(error: BaseException) -> bool:
+  """True for an error that another process of a multi-process run stopping causes: a
+  runtime error of a collective (gloo, NCCL), also when orbax or multihost_utils
+  re-raise it as another type."""
+  if jax.process_count() == 1:
+    return False
+  return isinstance(error, jax.errors.JaxRuntimeError) or any(
+      marker in str(error) for marker in _PEER_FAILURE)
+
+
 def fail(reason: str) -> None:
   """End this process of a run at once with `error: process P of N: reason`: a normal
   exit would wait in JAX's shutdown barrier for processes that are gone."""
