@@ -57,15 +57,16 @@ flags.DEFINE_string('sequence', None, 'Batch mode: register each scan of this fo
 flags.DEFINE_string('out', None, 'Batch mode: output folder.')
 
 
-def _ground_truth(path, cloud1, cloud2, required=True):
-  """T_12 of the pair from a groundtruths.txt, by the clouds' file stems; None when the
-  file does not list the pair and not `required`."""
+def _ground_truth(path, cloud1, cloud2, required=True, pairs=None):
+  """T_12 of the pair from a groundtruths.txt (`pairs`: its entries, read once by the
+  caller), by the clouds' file stems; None when the file does not list the pair and
+  not `required`."""
   stem = lambda p: os.path.splitext(os.path.basename(p))[0]
   try:
     i1, i2 = int(stem(cloud1)), int(stem(cloud2))
   except ValueError:
     raise SystemExit('error: --groundtruth needs clouds named by their index (e.g. 000001.bin)')
-  for pair in groundtruth.read_groundtruths(path):
+  for pair in groundtruth.read_groundtruths(path) if pairs is None else pairs:
     if (pair.idx1, pair.idx2) == (i1, i2):
       return pair.transform
     if (pair.idx1, pair.idx2) == (i2, i1):
@@ -118,6 +119,7 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
   else:
     pairs = _read_pairs(FLAGS.pairs)
   os.makedirs(FLAGS.out, exist_ok=True)
+  gt_pairs = groundtruth.read_groundtruths(FLAGS.groundtruth) if FLAGS.groundtruth else None
   features, errors = {}, []
 
   def features_of(path):   # each cloud once (a few kB): scan i serves pairs i-1 and i
@@ -143,7 +145,8 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
         t, inliers, trials, error = np.eye(4), 0, 0, str(e)
       transforms.append(t)
       errors.append(bool(error))
-      t_gt = _ground_truth(FLAGS.groundtruth, cloud1, cloud2, False) if FLAGS.groundtruth else None
+      t_gt = (_ground_truth(FLAGS.groundtruth, cloud1, cloud2, False, gt_pairs)
+              if gt_pairs is not None else None)
       gt = metrics.registration_errors(t_gt, t) if t_gt is not None else {}
       writer.writerow([cloud1, cloud2, len(f1.xyz), len(f2.xyz), inliers, trials,
                        f'{time.perf_counter() - start:.3f}', *t.ravel().tolist(),

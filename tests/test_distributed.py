@@ -86,23 +86,24 @@ def test_helpers_in_one_process():
 
 
 def test_two_processes_train_like_one_and_share_checkpoints(synthetic_root, tmp_path):
-  data = [f'--config.data.path={synthetic_root / "train"}']
   one, two = tmp_path / 'one', tmp_path / 'two'
+
+  def train(workdir, steps, **layout):
+    return _run('experiments.train', TINY_TRAIN + [f'--config.data.path={synthetic_root / "train"}',
+                                                   f'--config.train.num_steps={steps}',
+                                                   f'--workdir={workdir}'], **layout)
+
   # One process with 2 devices and two processes with 1 each: the same mesh of 2.
-  _run('experiments.train', TINY_TRAIN + data + ['--config.train.num_steps=4', f'--workdir={one}'],
-       devices=2)
-  logs = _run('experiments.train', TINY_TRAIN + data + ['--config.train.num_steps=4',
-                                                       f'--workdir={two}'], processes=2)
+  train(one, 4, devices=2)
+  logs = train(two, 4, processes=2)
   assert 'process 1 of 2' in logs[1][1]
   l1, l2 = _losses(one), _losses(two)
   assert sorted(l1) == [1, 2, 3, 4] and sorted(l2) == [1, 2, 3, 4]   # written once
   np.testing.assert_allclose([l2[s] for s in l2], [l1[s] for s in l2], rtol=1e-6)
   assert len(set(l1.values())) == 4
   # Each run's checkpoint at step 4 continues in the other layout, to the same losses.
-  _run('experiments.train', TINY_TRAIN + data + ['--config.train.num_steps=6', f'--workdir={two}'],
-       devices=2)
-  logs = _run('experiments.train', TINY_TRAIN + data + ['--config.train.num_steps=6',
-                                                       f'--workdir={one}'], processes=2)
+  train(two, 6, devices=2)
+  logs = train(one, 6, processes=2)
   assert 'Resumed from step 4' in logs[0][1]
   l1, l2 = _losses(one), _losses(two)
   assert sorted(l1) == sorted(l2) == [1, 2, 3, 4, 5, 6]

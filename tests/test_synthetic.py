@@ -189,6 +189,10 @@ def test_pushbroom_oxford_models_overlap_under_their_ground_truth(tmp_path):
   bad.test_oxford.sensor = 'spinnning'
   with pytest.raises(dataset.SyntheticConfigError, match="test_oxford.sensor must be one of"):
     dataset.check_config(bad)
+  short = tiny_config()
+  short.test_oxford.sensor = 'pushbroom'   # 80 m street, 30 m of margins, 60 m submaps
+  with pytest.raises(dataset.SyntheticConfigError, match='holds no whole push-broom submap'):
+    dataset.check_config(short)
 
 
 def test_training_folder_reads_as_oxford_index(tiny_set):

@@ -103,10 +103,7 @@ def ransac_sequential(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
   n = len(xyz1)
   best_score, best_inliers, trials, needed = -1, None, 0, float(min_trials)
   while needed > trials:
-    s = samples[trials]
-    model = kabsch(xyz2[s], xyz1[s])
-    residual = np.linalg.norm(xyz2 @ model[:3, :3].T + model[:3, 3] - xyz1, axis=1)
-    inliers = residual < inlier_threshold
+    inliers = _sample_inliers(xyz1, xyz2, samples[trials], inlier_threshold)
     score = int(inliers.sum())
     if score >= best_score:
       best_score, best_inliers = score, inliers
@@ -116,6 +113,13 @@ def ransac_sequential(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
       break
   transform = kabsch(xyz2[best_inliers], xyz1[best_inliers]) if best_score >= 3 else np.eye(4)
   return RansacResult(transform, best_inliers, trials)
+
+
+def _sample_inliers(xyz1: np.ndarray, xyz2: np.ndarray, sample: np.ndarray,
+                    threshold: float) -> np.ndarray:
+  """The inliers [C] bool of the Kabsch fit to one minimal sample [3]."""
+  model = kabsch(xyz2[sample], xyz1[sample])
+  return np.linalg.norm(xyz2 @ model[:3, :3].T + model[:3, 3] - xyz1, axis=1) < threshold
 
 
 def _pair_fit(src: jax.Array, dst: jax.Array, weight: jax.Array):
@@ -164,17 +168,6 @@ def _numpy_scorer(xyz1: np.ndarray, xyz2: np.ndarray, threshold: float):
   return score
 
 
-def _jax_scorer(xyz1: np.ndarray, xyz2: np.ndarray, threshold: float, dtype):
-  n, size = len(xyz1), _bucket(len(xyz1))
-  pad = lambda a: jnp.asarray(np.concatenate([a, np.zeros((size - n, 3))]).astype(dtype))
-  x1, x2, valid = pad(xyz1), pad(xyz2), jnp.asarray(np.arange(size) < n)
-
-  def score(samples: np.ndarray) -> np.ndarray:
-    return np.asarray(_inlier_counts(x1, x2, valid, jnp.asarray(samples, jnp.int32),
-                                     threshold=float(threshold)))
-  return score
-
-
 def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
            inlier_threshold: float = 1.0, confidence: float = 0.99, max_trials: int = 10_000,
            min_trials: int = 10, batch_size: int = 512, x64: bool = True,
@@ -196,19 +189,20 @@ def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
     trials, best_trial, best_score = _replay(_numpy_scorer(xyz1, xyz2, inlier_threshold), samples,
                                              len(xyz1), confidence, max_trials, min_trials,
                                              batch_size)
-    model = kabsch(xyz2[samples[best_trial]], xyz1[samples[best_trial]])
-    inliers = np.linalg.norm(xyz2 @ model[:3, :3].T + model[:3, 3] - xyz1, axis=1) < inlier_threshold
+    inliers = _sample_inliers(xyz1, xyz2, samples[best_trial], inlier_threshold)
     transform = kabsch(xyz2[inliers], xyz1[inliers]) if best_score >= 3 else np.eye(4)
     return RansacResult(transform, inliers, trials)
   with jax.enable_x64(x64):
     dtype = np.float64 if x64 else np.float32
-    trials, best_trial, best_score = _replay(_jax_scorer(xyz1, xyz2, inlier_threshold, dtype),
-                                             samples, len(xyz1), confidence, max_trials,
+    n, size = len(xyz1), _bucket(len(xyz1))
+    pad = lambda a: jnp.asarray(np.concatenate([a, np.zeros((size - n, 3))]).astype(dtype))
+    x1, x2, valid = pad(xyz1), pad(xyz2), jnp.asarray(np.arange(size) < n)
+    score = lambda batch: np.asarray(_inlier_counts(   # the host reads each batch's counts:
+        x1, x2, valid, jnp.asarray(batch, jnp.int32),  # the stopping rule needs them
+        threshold=float(inlier_threshold)))
+    trials, best_trial, best_score = _replay(score, samples, n, confidence, max_trials,
                                              min_trials, batch_size)
-    size = _bucket(len(xyz1))
-    pad = lambda a: jnp.asarray(np.concatenate([a, np.zeros((size - len(a), 3))]).astype(dtype))
-    r, t, inliers = _refit(pad(xyz1), pad(xyz2), jnp.asarray(np.arange(size) < len(xyz1)),
-                           jnp.asarray(samples[best_trial], jnp.int32),
+    r, t, inliers = _refit(x1, x2, valid, jnp.asarray(samples[best_trial], jnp.int32),
                            threshold=float(inlier_threshold))
   inliers = np.asarray(inliers)[:len(xyz1)]
   if best_score < 3:

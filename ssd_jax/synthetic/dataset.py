@@ -70,6 +70,13 @@ def check_config(config) -> None:
     raise SyntheticConfigError(f'test_oxford.sensor must be one of {OXFORD_SENSORS}, got '
                                f'{config.test_oxford.sensor!r}')
   positive('test_oxford.line_spacing', config.test_oxford.get('line_spacing', 0.2))
+  if (config.test_oxford.get('sensor', 'spinning') == 'pushbroom' and config.test_oxford.num_scenes
+      and config.scene_length - 2 * trajectory.MARGIN < 2 * config.test_oxford.crop_radius):
+    raise SyntheticConfigError(
+        f'test_oxford: a pass of scene_length {config.scene_length} m (less '
+        f'{2 * trajectory.MARGIN:.0f} m of margins) holds no whole push-broom submap of 2 x '
+        f'crop_radius = {2 * config.test_oxford.crop_radius} m; lower test_oxford.crop_radius '
+        'or raise scene_length')
   positive('clusters.num_pairs', config.clusters.num_pairs, allow_zero=True)
   if config.clusters.centers not in ('random', 'iss'):
     raise SyntheticConfigError(f"clusters.centers must be 'random' or 'iss', got "
@@ -248,6 +255,11 @@ def _write_test_oxford_pushbroom(config, out: Path, tick) -> int:
                                   rot_rng, idx0 + len(frames))
         frames.append(reported[c] @ geometry.make_transform(rot.T, np.zeros(3)))
         tick()
+    if not frames:   # check_config refuses such lengths; a curved street may still be short
+      raise SyntheticConfigError(
+          f'test_oxford scene {seq}: no whole push-broom submap of 2 x crop_radius = '
+          f'{2 * cfg.crop_radius} m along its passes; lower test_oxford.crop_radius or raise '
+          'scene_length')
     frames = np.stack(frames)
     all_pairs += [groundtruth.GroundTruthPair(idx0 + i, idx0 + j, groundtruth.relative_pose(frames, i, j))
                   for i, j in groundtruth.close_pairs(frames[:, :3, 3], cfg.pair_max_distance)]

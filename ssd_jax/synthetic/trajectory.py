@@ -24,8 +24,11 @@ def rotation_zyx(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.nda
       np.stack([-sp, cp * sr, cp * cr], -1)], -2)
 
 
+MARGIN = 15.0   # metres a drive keeps from each end of the street
+
+
 def drive(scene: Scene, rng: np.random.Generator, spacing: float, mount_height: float,
-          spacing_jitter: float = 0.0, margin: float = 15.0, return_leg: bool = True,
+          spacing_jitter: float = 0.0, margin: float = MARGIN, return_leg: bool = True,
           weave: float = 0.3,
           yaw_noise_deg: float = 1.0, tilt_noise_deg: float = 0.3) -> np.ndarray:
   """Sensor poses T_world_sensor [P, 4, 4], one every `spacing` metres of travel, each
