@@ -3,7 +3,7 @@ r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into clou
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin \
         [--keypoints=iss|learned|random] [--descriptor=fpfh|learned|learned,fpfh] \
         [--checkpoint=ours|RUN_DIR|EXPORT_DIR] [--groundtruth=DIR/groundtruths.txt] \
-        [--icp] [--json=OUT.json] [--plot=OUT.png]
+        [--icp] [--draws=N] [--json=OUT.json] [--plot=OUT.png]
     # many pairs in one process: a list of pairs, or the consecutive scans of a folder
     python -m experiments.register --pairs=PAIRS.txt --out=DIR [--descriptor=learned]
     python -m experiments.register --sequence=SCANS_DIR --out=DIR [--groundtruth=...]
@@ -22,6 +22,7 @@ first scan's frame, KITTI's 12 numbers per line) and trajectory.png. PAIRS.txt h
 """
 
 import csv
+import dataclasses
 import json
 import os
 import time
@@ -48,6 +49,8 @@ flags.DEFINE_string('checkpoint', None, 'Shipped model name, export folder or tr
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding this pair (optional).')
 flags.DEFINE_bool('icp', False, 'Refine with point-to-point ICP (Open3D) after RANSAC.')
 flags.DEFINE_integer('seed', 0, 'RANSAC / random-keypoint seed.')
+flags.DEFINE_integer('draws', 0, 'Learned descriptors: average this many random samplings '
+                     "of each ball (0: the model's own setting; fewer is faster, noisier).")
 flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m normal / FPFH searches.')
 flags.DEFINE_string('json', None, 'Write the results here.')
 flags.DEFINE_string('plot', None, 'Draw the clouds and inlier matches here (PNG).')
@@ -166,6 +169,14 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
     print(f'wrote {os.path.join(FLAGS.out, "poses.txt")} and trajectory.png')
 
 
+def _load_model(checkpoint: str):
+  """The model named by --checkpoint, describing with --draws samplings when set."""
+  if FLAGS.draws < 0:
+    raise ValueError(f'--draws must be >= 0, got {FLAGS.draws}')
+  model = pretrained.load(checkpoint)
+  return dataclasses.replace(model, draws=FLAGS.draws) if FLAGS.draws else model
+
+
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
@@ -187,7 +198,7 @@ def main(argv):
   checkpoint = FLAGS.checkpoint or ('ours_detector' if FLAGS.keypoints == 'learned' else 'ours')
   if batch:
     try:
-      _batch(FLAGS.descriptor[0], pretrained.load(checkpoint) if needs_model else None,
+      _batch(FLAGS.descriptor[0], _load_model(checkpoint) if needs_model else None,
              checkpoint)
     except (io.CloudFileError, clean.CloudDataError, FileNotFoundError, ValueError) as e:
       raise SystemExit(f'error: {e}') from None
@@ -201,7 +212,7 @@ def main(argv):
     t_gt = _ground_truth(FLAGS.groundtruth, FLAGS.cloud1, FLAGS.cloud2) if FLAGS.groundtruth else None
     model = None
     if needs_model:
-      model = pretrained.load(checkpoint)
+      model = _load_model(checkpoint)
   except (io.CloudFileError, clean.CloudDataError, FileNotFoundError, ValueError) as e:
     raise SystemExit(f'error: {e}') from None
   results = []
@@ -216,6 +227,7 @@ def main(argv):
     out = {'keypoints': FLAGS.keypoints, 'descriptor': descriptor,
            'num_keypoints': [len(f1.xyz), len(f2.xyz)], 'inliers': int(reg.inliers.sum()),
            'trials': reg.trials, 'model': checkpoint if descriptor == 'learned' else None,
+           'draws': model.draws if descriptor == 'learned' else None,
            'seconds': {**{f'cloud1_{k}': v for k, v in f1.seconds.items()},
                        **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds}}
     if FLAGS.icp:

@@ -5,9 +5,10 @@
     kp_idx, attention = inference.detect(model, cloud)            # 3DFeat-Net keypoints
 
 The network runs jitted on clusters of a fixed chunk size (the last chunk is
-padded and its outputs dropped), and clouds are padded to power-of-two size
-buckets (masked), so a stream of clouds and keypoint sets of any size compiles
-once per bucket, not once per cloud. Neighbourhoods are PointNet++ ball queries (the first c
+padded and its outputs dropped). `describe` gathers each cluster's points on the
+host, so the network compiles once whatever the cloud's and keypoint set's size;
+the attention path and the dense ball query pad clouds to power-of-two size buckets
+(masked) and compile once per bucket. Neighbourhoods are PointNet++ ball queries (the first c
 points within r in index order, padded by repeating the first). Two paths give
 identical results:
   * 'kdtree': a host KD-tree (scipy) finds the neighbours, far faster on CPU for
@@ -15,7 +16,8 @@ identical results:
   * 'dense': `grouping.ball_query` in JAX, a dense [chunk, N] distance matrix,
     with the cloud padded to a power-of-two bucket.
 Clouds are put in a seeded random order first, so that "first c in index
-order" is a random sample of the ball, as in training.
+order" is a random sample of the ball, as in training (`describe` finds each ball
+once and, for each draw, keeps the members that come first in that draw's order).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from ssd_jax import checkpoint, grouping, network
 from ssd_jax.data.clean import check_cloud
 
 SEARCHES = ('kdtree', 'dense')
+DENSE_CHUNK = 512   # centers per dense ball query ([DENSE_CHUNK, N] distances)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,7 +120,7 @@ def _bucket(n: int, smallest: int = 1024) -> int:
 
 def shuffled(points: np.ndarray, seed: int = 0) -> np.ndarray:
   """The cloud in a seeded random order (see the module docstring)."""
-  return points[np.random.default_rng(seed).permutation(len(points))]
+  return points[_permutation(len(points), seed)]
 
 
 def kdtree_neighbourhoods(points: np.ndarray | spatial.cKDTree, centers: np.ndarray,
@@ -186,34 +189,127 @@ def _chunks(model: Model, points: np.ndarray, centers: np.ndarray, what: str, se
 
 
 def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: str = 'kdtree',
-             chunk: int = 512, seed: int = 0) -> np.ndarray:
+             chunk: int = 256, seed: int = 0) -> np.ndarray:
   """Learned descriptors at keypoints.
 
   points [N, 3] metres (the search surface); keypoints [K, 3] metres (cluster
   centers) -> [K, D] float32, L2-normalised (the normalised mean over `model.draws`
-  samplings of each ball).
+  samplings of each ball). The balls are found once; every draw is a different random
+  subset of each, and the clusters of all draws go through the network together, in
+  chunks of `chunk` (one compiled shape whatever the cloud's or keypoint set's size).
   """
   points = check_cloud(points)
   keypoints = check_cloud(keypoints, 'keypoints')
-  return _mean_over_draws(model.draws, seed, lambda order_seed: np.concatenate(
-      _chunks(model, shuffled(points, order_seed), keypoints, 'describe', search, chunk)))
+  if search not in SEARCHES:
+    raise ValueError(f'search must be one of {SEARCHES}, got {search!r}')
+  order_seeds = _order_seeds(model.draws, seed)
+  if search == 'kdtree':
+    balls = [np.asarray(b, np.int64) for b in spatial.cKDTree(points).query_ball_point(
+        keypoints, np.nextafter(model.radius, 0))]
+    idx, has = zip(*(_first_in_order(balls, _permutation(len(points), s), model.num_samples)
+                     for s in order_seeds))
+  else:
+    idx, has = zip(*(_dense_first_in_order(model, points, keypoints, s) for s in order_seeds))
+  groups = points[np.concatenate(idx)]                            # [draws * K, c, 3]
+  centers = np.tile(keypoints, (len(order_seeds), 1))
+  return _mean_over_draws(_describe_groups(model, groups, centers, np.concatenate(has), chunk),
+                          len(order_seeds))
 
 
-def _mean_over_draws(draws: int, seed: int, describe_once) -> np.ndarray:
-  """The L2-normalised mean of `describe_once(order_seed)` [K, D] over `draws` orders of
-  the points (each a different sampling of every ball). Draw 0 is the seed's own order,
-  so draws=1 is exactly the single-sampling result."""
+def _order_seeds(draws: int, seed) -> list:
+  """The point orders of `draws` samplings: draw 0 is `seed`'s own order, so draws=1 is
+  exactly the single-sampling result; draw j > 0 is (seed, j)."""
   if draws < 1:
     raise ValueError(f'model.draws must be >= 1, got {draws}')
-  total = describe_once(seed)
+  return [seed] + [(seed, draw) for draw in range(1, draws)]
+
+
+def _permutation(n: int, order_seed) -> np.ndarray:
+  """The order `shuffled(points, order_seed)` puts n points in: new position -> old index."""
+  return np.random.default_rng(order_seed).permutation(n)
+
+
+def _first_in_order(balls: list[np.ndarray], perm: np.ndarray,
+                    num_samples: int) -> tuple[np.ndarray, np.ndarray]:
+  """`kdtree_neighbourhoods` on the shuffled cloud, from balls found once on the original.
+
+  balls: K arrays of point indices within the radius; perm [N] as `_permutation` ->
+  idx [K, c] int64 original indices (the c members that come first in the shuffled
+  order, in that order, padded by repeating the first), has_neighbour [K] bool.
+  """
+  rank = np.empty_like(perm)
+  rank[perm] = np.arange(len(perm))
+  idx = np.zeros((len(balls), num_samples), np.int64)
+  has = np.zeros(len(balls), bool)
+  for k, ball in enumerate(balls):
+    if not len(ball):
+      continue
+    r = rank[ball]
+    if len(r) > num_samples:
+      r = np.partition(r, num_samples - 1)[:num_samples]
+    r.sort()
+    idx[k, :len(r)] = perm[r]
+    idx[k, len(r):] = perm[r[0]]
+    has[k] = True
+  return idx, has
+
+
+def _dense_first_in_order(model: Model, points: np.ndarray, keypoints: np.ndarray,
+                          order_seed) -> tuple[np.ndarray, np.ndarray]:
+  """As `_first_in_order`, by `grouping.ball_query` in JAX on the shuffled cloud."""
+  perm = _permutation(len(points), order_seed)
+  size = _bucket(len(points))
+  padded = np.zeros((size, 3), np.float32)
+  padded[:len(points)] = points[perm]
+  valid = jnp.asarray(np.arange(size) < len(points))
+  idx, has = [], []
+  for start in range(0, len(keypoints), DENSE_CHUNK):
+    ctr = np.zeros((DENSE_CHUNK, 3), np.float32)
+    part = keypoints[start:start + DENSE_CHUNK]
+    ctr[:len(part)] = part
+    i, h = _dense_neighbourhoods(jnp.asarray(padded), valid, jnp.asarray(ctr),
+                                 radius=model.radius, num_samples=model.num_samples)
+    idx.append(np.asarray(i)[:len(part)])
+    has.append(np.asarray(h)[:len(part)])
+  idx, has = np.concatenate(idx), np.concatenate(has)
+  return np.where(has[:, None], perm[idx], 0), has
+
+
+def _mean_over_draws(descriptors: np.ndarray, draws: int) -> np.ndarray:
+  """descriptors [draws * K, D], draw-major -> [K, D]: the L2-normalised sum over draws
+  (the one draw itself when draws=1)."""
   if draws == 1:
-    return total
-  for draw in range(1, draws):
-    total = total + describe_once((seed, draw))
+    return descriptors
+  parts = np.split(descriptors, draws)
+  total = parts[0]
+  for part in parts[1:]:
+    total = total + part
   return (total / np.linalg.norm(total, axis=1, keepdims=True).clip(1e-12)).astype(np.float32)
 
 
-def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, chunk: int = 512,
+def _describe_groups(model: Model, groups: np.ndarray, centers: np.ndarray, has: np.ndarray,
+                     chunk: int) -> np.ndarray:
+  """The network on host-gathered clusters: groups [M, c, 3] metres, centers [M, 3],
+  has [M] bool -> descriptors [M, D], `chunk` clusters per call."""
+  c = model.num_samples
+  # Each chunk is its own flat "cloud" of chunk * c points whose k-th cluster is rows
+  # k*c ... k*c + c - 1, so the jitted network sees one static shape.
+  flat_idx = jnp.arange(chunk * c, dtype=jnp.int32).reshape(chunk, c)
+  out = []
+  for start in range(0, len(groups), chunk):
+    m = min(chunk, len(groups) - start)
+    pts = np.zeros((chunk, c, 3), np.float32)
+    ctr = np.zeros((chunk, 3), np.float32)
+    hb = np.zeros(chunk, bool)
+    pts[:m], ctr[:m], hb[:m] = groups[start:start + m], centers[start:start + m], has[start:start + m]
+    d = _run_on_groups(model.net, model.variables, jnp.asarray(pts.reshape(-1, 3)),
+                       jnp.asarray(ctr), flat_idx, jnp.asarray(hb), radius=model.radius,
+                       what='describe')
+    out.append(np.asarray(d)[:m])
+  return np.concatenate(out) if out else np.zeros((0, model.net.descriptor_dim), np.float32)
+
+
+def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, chunk: int = 256,
                       seed: int = 0) -> np.ndarray:
   """One learned descriptor per small cloud, at its center, batched across clouds.
 
@@ -228,35 +324,19 @@ def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, c
   if len(centers) != len(clouds):
     raise ValueError(f'{len(clouds)} clouds but {len(centers)} centers')
   clouds = [check_cloud(cloud, f'cloud {k}') for k, cloud in enumerate(clouds)]
-  return _mean_over_draws(model.draws, seed, lambda order_seed: _describe_clusters_once(
-      model, clouds, centers, chunk, order_seed))
-
-
-def _describe_clusters_once(model: Model, clouds, centers: np.ndarray, chunk: int,
-                            order_seed) -> np.ndarray:
-  """`describe_clusters` for one sampling of each ball (the clouds in `order_seed`'s order)."""
+  order_seeds = _order_seeds(model.draws, seed)
   c = model.num_samples
-  groups = np.zeros((len(clouds), c, 3), np.float32)
-  has = np.zeros(len(clouds), bool)
+  groups = np.zeros((len(order_seeds), len(clouds), c, 3), np.float32)
+  has = np.zeros((len(order_seeds), len(clouds)), bool)
   for k, cloud in enumerate(clouds):
-    pts = shuffled(cloud, order_seed)
-    idx, h = kdtree_neighbourhoods(pts, centers[k:k + 1], model.radius, c)
-    groups[k], has[k] = pts[idx[0]], h[0]
-  # Each chunk is its own flat "cloud" of chunk * c points whose k-th cluster is rows
-  # k*c ... k*c + c - 1, so the jitted network sees one static shape.
-  flat_idx = jnp.arange(chunk * c, dtype=jnp.int32).reshape(chunk, c)
-  out = []
-  for start in range(0, len(clouds), chunk):
-    m = min(chunk, len(clouds) - start)
-    pts = np.zeros((chunk, c, 3), np.float32)
-    ctr = np.zeros((chunk, 3), np.float32)
-    hb = np.zeros(chunk, bool)
-    pts[:m], ctr[:m], hb[:m] = groups[start:start + m], centers[start:start + m], has[start:start + m]
-    d = _run_on_groups(model.net, model.variables, jnp.asarray(pts.reshape(-1, 3)),
-                       jnp.asarray(ctr), flat_idx, jnp.asarray(hb), radius=model.radius,
-                       what='describe')
-    out.append(np.asarray(d)[:m])
-  return np.concatenate(out) if out else np.zeros((0, model.net.descriptor_dim), np.float32)
+    ball = [np.asarray(spatial.cKDTree(cloud).query_ball_point(
+        centers[k], np.nextafter(model.radius, 0)), np.int64)]
+    for d, order_seed in enumerate(order_seeds):
+      idx, h = _first_in_order(ball, _permutation(len(cloud), order_seed), c)
+      groups[d, k], has[d, k] = cloud[idx[0]], h[0]
+  descriptors = _describe_groups(model, groups.reshape(-1, c, 3),
+                                 np.tile(centers, (len(order_seeds), 1)), has.reshape(-1), chunk)
+  return _mean_over_draws(descriptors, len(order_seeds))
 
 
 def detect_at(model: Model, points: np.ndarray, centers: np.ndarray, search: str = 'kdtree',

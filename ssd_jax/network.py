@@ -84,20 +84,53 @@ class BatchNormReLU(nn.Module):
     return y
 
 
+class BroadcastDense(nn.Module):
+  """Dense on concat([x, g broadcast over the c points]) without building the concatenation.
+
+  x [..., c, A] per point, g [..., B] per cluster -> [..., c, features]. The kernel is
+  [A + B, features], the one `nn.Dense` would hold for the concatenated input (same
+  initialiser), so weights carry over; the cluster part is one row per cluster instead of
+  c copies, which on CPU saves the memory pass over the [..., c, A + B] concatenation
+  and the g half of the per-point GEMM.
+  """
+  features: int
+  use_bias: bool = True
+
+  @nn.compact
+  def __call__(self, x: jax.Array, g: jax.Array) -> jax.Array:
+    a = x.shape[-1]
+    kernel = self.param('kernel', nn.initializers.lecun_normal(),
+                        (a + g.shape[-1], self.features))
+    # A 2-D GEMM over the flattened points: see MLP.
+    y = (x.reshape(-1, a) @ kernel[:a]).reshape(*x.shape[:-1], self.features)
+    y = y + (g @ kernel[a:])[..., None, :]
+    if self.use_bias:
+      y = y + self.param('bias', nn.initializers.zeros, (self.features,))
+    return y
+
+
 class MLP(nn.Module):
   """Shared per-point / per-cluster MLP: Dense -> BatchNorm -> ReLU for each width."""
   features: Sequence[int]
   bn_momentum: float = 0.99
 
   @nn.compact
-  def __call__(self, x: jax.Array, train: bool) -> jax.Array:
+  def __call__(self, x: jax.Array, train: bool, context: jax.Array | None = None) -> jax.Array:
+    """x [..., A] -> [..., features[-1]]. context [..., B] (x then [..., c, A]): the first
+    layer sees each point's features concatenated with its cluster's context
+    (`BroadcastDense`)."""
     # One 2-D GEMM per layer: with the leading axes flattened, the weight
     # gradient contracts a single axis, which XLA:CPU runs as a plain GEMM
     # (contracting several batch axes at once was ~5x slower in the backward).
     lead = x.shape[:-1]
-    x = x.reshape(-1, x.shape[-1])
-    for width in self.features:
-      x = nn.Dense(width, use_bias=False)(x)
+    if context is None:
+      x = x.reshape(-1, x.shape[-1])
+    for i, width in enumerate(self.features):
+      if i == 0 and context is not None:
+        x = BroadcastDense(width, use_bias=False, name='Dense_0')(x, context)
+        x = x.reshape(-1, width)
+      else:
+        x = nn.Dense(width, use_bias=False, name=f'Dense_{i}')(x)
       x = BatchNormReLU(self.bn_momentum)(x, train)
     return x.reshape(*lead, x.shape[-1])
 
@@ -144,8 +177,7 @@ class EquivariantDetector(nn.Module):
     pooled = jnp.max(x, axis=-2)
     g = MLP((128, 64), self.bn_momentum, name='cluster_mlp')(pooled, train)
     attention = nn.softplus(nn.Dense(1, name='attention')(g))[..., 0]
-    per_point = jnp.concatenate([x, jnp.broadcast_to(g[..., None, :], (*x.shape[:-1], 64))], -1)
-    w = nn.Dense(1, name='orientation')(per_point)           # [..., c, 1], invariant
+    w = BroadcastDense(1, name='orientation')(x, g)          # [..., c, 1], invariant
     v = jnp.mean(w * xy, axis=-2)                            # [..., 2], turns with the cluster
     both_zero = jnp.all(v == 0, axis=-1)
     angle = jnp.arctan2(v[..., 1], jnp.where(both_zero, 1.0, v[..., 0]))
@@ -163,10 +195,9 @@ class Descriptor(nn.Module):
   @nn.compact
   def __call__(self, clusters: jax.Array, train: bool) -> jax.Array:
     x = MLP((32, 64), self.bn_momentum, name='point_mlp1')(clusters, train)
-    pooled = jnp.max(x, axis=-2, keepdims=True)
-    x = jnp.concatenate([x, jnp.broadcast_to(pooled, x.shape)], -1)
+    pooled = jnp.max(x, axis=-2)
     width = 256 if self.dim > 64 else 128
-    x = MLP((width,), self.bn_momentum, name='point_mlp2')(x, train)
+    x = MLP((width,), self.bn_momentum, name='point_mlp2')(x, train, context=pooled)
     x = jnp.max(x, axis=-2)
     x = nn.Dense(self.dim, name='out')(x)
     return x * jax.lax.rsqrt(jnp.sum(x * x, -1, keepdims=True) + 1e-12)

@@ -5,6 +5,7 @@ import dataclasses
 import jax
 import numpy as np
 import pytest
+from scipy import spatial
 
 from ssd_jax import grouping, inference, network, train
 from ssd_jax.configs import cpu_small
@@ -53,16 +54,39 @@ def test_kdtree_and_dense_paths_give_identical_results(model):
   assert att_a.shape == (3000,) and np.all(att_a >= 0)
 
 
-def test_stream_of_clouds_compiles_once_per_bucket(model):
+def test_stream_of_clouds_compiles_the_network_once(model):
   rng = np.random.default_rng(2)
   inference.describe(model, _cloud(rng, 1500), _cloud(rng, 40), chunk=64)
-  before = inference._run_on_groups._cache_size()
+  inference.describe(model, _cloud(rng, 1500), _cloud(rng, 40), chunk=64, search='dense')
+  network_shapes = inference._run_on_groups._cache_size()
+  dense_shapes = inference._dense_neighbourhoods._cache_size()
   for n, k in [(1100, 10), (1800, 64), (2000, 100), (1300, 3)]:   # all in the 2048 bucket
-    out = inference.describe(model, _cloud(rng, n), _cloud(rng, k), chunk=64)
+    out = inference.describe(model, _cloud(rng, n), _cloud(rng, k), chunk=64, search='dense')
     assert out.shape == (k, 32)
-  assert inference._run_on_groups._cache_size() == before
-  inference.describe(model, _cloud(rng, 5000), _cloud(rng, 10), chunk=64)   # 8192 bucket
-  assert inference._run_on_groups._cache_size() == before + 1
+  assert inference._dense_neighbourhoods._cache_size() == dense_shapes
+  inference.describe(model, _cloud(rng, 5000), _cloud(rng, 10), chunk=64, search='dense')
+  assert inference._dense_neighbourhoods._cache_size() == dense_shapes + 1   # 8192 bucket
+  # The network sees host-gathered clusters: one shape whatever the cloud size.
+  inference.describe(model, _cloud(rng, 9000), _cloud(rng, 130), chunk=64)
+  assert inference._run_on_groups._cache_size() == network_shapes
+
+
+def test_draws_sample_each_ball_as_a_shuffled_cloud_would():
+  rng = np.random.default_rng(8)
+  pts = _cloud(rng, 3000)
+  centers = np.concatenate([pts[:40], [[500.0, 0, 0]]]).astype(np.float32)
+  balls = [np.asarray(b, np.int64) for b in spatial.cKDTree(pts).query_ball_point(
+      centers, np.nextafter(2.0, 0))]
+  for order_seed in (0, (0, 1), 7):
+    perm = inference._permutation(len(pts), order_seed)
+    np.testing.assert_array_equal(pts[perm], inference.shuffled(pts, order_seed))
+    idx, has = inference._first_in_order(balls, perm, 16)
+    ref_idx, ref_has = inference.kdtree_neighbourhoods(pts[perm], centers, 2.0, 16)
+    np.testing.assert_array_equal(has, ref_has)
+    np.testing.assert_array_equal(idx[has], perm[ref_idx[has]])
+    assert not has[-1] and has[:-1].all()
+    small = [len(b) for b in balls[:-1]]
+    assert min(small) < 16 < max(small)   # both padded and subsampled balls are covered
 
 
 def test_non_max_suppression_hand_computed():

@@ -1,3 +1,4 @@
+import flax.linen as nn
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -181,3 +182,21 @@ def test_paper_head_is_not_equivariant_by_construction():
 def test_unknown_orientation_head_is_a_clear_error():
   with pytest.raises(ValueError, match='orientation_head must be one of'):
     network.FeatureNet(orientation_head='pca').init(jax.random.key(0), jnp.zeros((1, 4, 8, 3)))
+
+
+def test_broadcast_dense_equals_dense_on_the_concatenation():
+  rng = np.random.default_rng(0)
+  x = jnp.asarray(rng.normal(size=(2, 3, 5, 4)), jnp.float32)     # [B, k, c, A]
+  g = jnp.asarray(rng.normal(size=(2, 3, 6)), jnp.float32)        # [B, k, B']
+  layer = network.BroadcastDense(7)
+  params = layer.init(jax.random.key(0), x, g)
+  concat = jnp.concatenate([x, jnp.broadcast_to(g[..., None, :], (2, 3, 5, 6))], -1)
+  dense = nn.Dense(7)
+  # The same kernel shape and initialiser as nn.Dense on the concatenation, so stored
+  # weights of either layout load into the other.
+  ref_params = dense.init(jax.random.key(0), concat)
+  assert jax.tree.map(jnp.shape, params) == jax.tree.map(jnp.shape, ref_params)
+  np.testing.assert_array_equal(params['params']['kernel'], ref_params['params']['kernel'])
+  params = jax.tree.map(lambda a: a + jnp.asarray(rng.normal(size=a.shape), a.dtype), params)
+  np.testing.assert_allclose(layer.apply(params, x, g), dense.apply(params, concat),
+                             rtol=1e-5, atol=1e-5)

@@ -10,7 +10,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from ssd_jax import geometry
+from ssd_jax import geometry, pretrained
 from ssd_jax.data import benchmarks, io
 from ssd_jax.registration import metrics
 from tests.conftest import shared_path
@@ -64,6 +64,10 @@ def test_register_cli_errors(tiny_set, tmp_path):
              '--descriptor=learned', f'--checkpoint={tmp_path / "none"}')
   assert out.returncode != 0 and 'none: no such checkpoint directory' in out.stderr
   assert 'Traceback' not in out.stderr
+  out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={cloud}',
+             '--descriptor=learned', '--draws=-2')
+  assert out.returncode != 0 and '--draws must be >= 0, got -2' in out.stderr
+  assert 'Traceback' not in out.stderr
   # An output path that cannot be written fails before the work, not after it.
   (tmp_path / 'a_file').write_text('')
   out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={cloud}',
@@ -84,7 +88,15 @@ def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
   assert out.returncode == 0, out.stderr[-3000:]
   result = json.loads((tmp_path / 'r.json').read_text())
   assert result['descriptor'] == 'learned' and result['model'] == 'ours'
+  assert result['draws'] == pretrained.load('ours').draws == 4
   assert result['errors']['success'], result
+  # One sampling per ball: a quarter of the network's work, the same pair still registers.
+  out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
+             '--descriptor=learned', '--draws=1', f'--groundtruth={folder / "groundtruths.txt"}',
+             f'--json={tmp_path / "r1.json"}')
+  assert out.returncode == 0, out.stderr[-3000:]
+  one = json.loads((tmp_path / 'r1.json').read_text())
+  assert one['draws'] == 1 and one['errors']['success'] and one['T_12'] != result['T_12']
 
 
 def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):

@@ -5,7 +5,7 @@ import pytest
 
 from ssd_jax import geometry
 from ssd_jax.data import benchmarks, clean, groundtruth, io
-from ssd_jax.registration import features, metrics, pipeline, ransac
+from ssd_jax.registration import features, metrics, pipeline, ransac, reference
 from ssd_jax.synthetic import trajectory
 
 
@@ -199,3 +199,14 @@ def test_pipeline_refuses_bad_clouds_with_one_line():
     clean.clean_cloud((pts + 1e9).astype(np.float32), 'far')
   far = clean.clean_cloud(pts + 1e9, 'far', np.float64)
   assert far.dtype == np.float64 and np.ptp(far - 1e9) > 10
+
+
+def test_open3d_reference_pipeline_registers_a_pair_and_refuses_a_flat_one(synthetic_root):
+  pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
+  c1, c2 = (io.read_cloud(p) for p in (pair.cloud1, pair.cloud2))
+  t, seconds = reference.open3d_register(c1, c2)
+  assert metrics.registration_errors(pair.transform, t)['success']
+  assert set(seconds) == {'features', 'matching', 'ransac'} and min(seconds.values()) >= 0
+  flat = np.c_[np.random.default_rng(0).uniform(-10, 10, (2000, 2)), np.zeros(2000)]
+  with pytest.raises(ValueError, match='too few ISS keypoints'):
+    reference.open3d_register(flat, flat)

@@ -225,10 +225,13 @@ def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
       flat = lambda t: np.concatenate([np.ravel(x) for x in jax.tree.leaves(t)])
       grad_diff = np.abs(flat(f1[1]) - flat(f2[1])).max() / np.abs(flat(f1[1])).max()
       stats_diff = np.abs(flat(f1[2]) - flat(f2[2])).max() / np.abs(flat(f1[2])).max()
-      loss_diff = max(abs(a - b) / a for a, b in zip(h1, h2))
+      loss_diff = [abs(a - b) / a for a, b in zip(h1, h2)]
       print('rel diffs: gradient', grad_diff, 'batch stats', stats_diff, 'losses', loss_diff)
       assert grad_diff < 1e-4 and stats_diff < 1e-5 and abs(f1[0] - f2[0]) / f1[0] < 1e-5
-      assert loss_diff < 1e-3
+      # Step 1 sees the same parameters: its loss agrees to summation order. Later steps
+      # follow Adam's first updates, ~lr * sign(g), which turn float-level gradient
+      # differences on near-zero components into whole-lr steps: a few tenths of a percent.
+      assert loss_diff[0] < 1e-5 and max(loss_diff) < 1e-2
   ''')
   env = dict(os.environ, XLA_FLAGS='--xla_force_host_platform_device_count=2', JAX_PLATFORMS='cpu')
   out = subprocess.run([sys.executable, '-c', script], cwd=ROOT, env=env, capture_output=True,
