@@ -6,9 +6,9 @@ Command:
 
 Writes 12 training scenes (~1,100 clouds with a 3DFeat-Net `train.txt`), 4
 KITTI-style test scenes (~170 clouds, ~200 pairs), 4 Oxford-style test scenes
-and 2,000 descriptor-matching cluster pairs, in ~15 minutes on 2 CPU cores
-(~0.3 s per scan; the FPFH-free part). See `ssd_jax/synthetic/dataset.py` for
-the layout.
+(push-broom submaps: 121 models, 108 pairs) and 2,000 descriptor-matching cluster
+pairs, in ~15 minutes on 2 CPU cores (~0.3 s per scan; the FPFH-free part). See
+`ssd_jax/synthetic/dataset.py` for the layout.
 """
 
 import ml_collections
@@ -56,7 +56,8 @@ def get_config() -> ml_collections.ConfigDict:
   kitti.pair_max_distance = 10.0
   kitti.random_yaw = False         # True: turn each scan about z (configs/synthetic_kitti_yaw.py)
 
-  # Oxford-style test models: 30 m crop, 16,384 points, random rotation about z.
+  # Oxford-style test models: 60 m submaps (2 x crop_radius), 16,384 points, random
+  # rotation about z.
   config.test_oxford = oxford = ml_collections.ConfigDict()
   oxford.num_scenes = 4
   oxford.spacing = 10.0
@@ -67,10 +68,11 @@ def get_config() -> ml_collections.ConfigDict:
   # The largest grid <= this (5 % steps) giving >= num_points distinct points in the crop,
   # then a random subset: real models have a near-regular 0.2 m spacing and no repeats.
   oxford.voxel_size = 0.2
-  # 'spinning': one HDL-64 scan cropped to crop_radius; 'pushbroom': a 2D line scanner's
-  # lines accumulated over 2 crop_radius metres of one pass, every line_spacing metres
-  # (ssd_jax/synthetic/pushbroom.py), as RobotCar's test models were made.
-  oxford.sensor = 'spinning'
+  # 'pushbroom' (default): a 2D line scanner's lines accumulated over 2 crop_radius metres
+  # of one pass, every line_spacing metres (ssd_jax/synthetic/pushbroom.py), as RobotCar's
+  # test models were made. 'spinning': one HDL-64 scan cropped to crop_radius, the models
+  # the results before 2026-12-02 were measured on (docs/synthetic_data.md).
+  oxford.sensor = 'pushbroom'
   oxford.line_spacing = 0.2
 
   # Descriptor-matching cluster pairs (docs/method.md §4).

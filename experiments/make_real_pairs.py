@@ -2,8 +2,12 @@ r"""Registration pairs from the real scans beside the project (a re-scan of each
 from a displaced, turned virtual sensor; `ssd_jax.data.rescan`).
 
     python -m experiments.make_real_pairs --real=../shared/data --out=data_cache/real_pairs
+    # pairs like RobotCar's test pairs: two submaps of each real Oxford test model
+    python -m experiments.make_real_pairs --sources=example/oxford_*.bin --submaps \
+        --max_range=30 --pairs_per_cloud=24 --out=data_cache/real_oxford_submaps
 
-Every `.bin` under REAL/example and REAL/kitti_object_velodyne gives --pairs_per_cloud
+Every scan matching --sources (default: every `.bin` under REAL/example and
+REAL/kitti_object_velodyne) gives --pairs_per_cloud
 pairs, one per equal bin of relative yaw over the whole circle. The set is a function of
 --seed; the real scans are read, never copied into the project.
 """
@@ -24,21 +28,30 @@ flags.DEFINE_string('real', os.environ.get('SSD_JAX_SHARED_DATA', '../shared/dat
 flags.DEFINE_string('out', 'data_cache/real_pairs', 'Output directory.')
 flags.DEFINE_integer('seed', 0, 'Seed of the virtual sensors.')
 flags.DEFINE_integer('pairs_per_cloud', 8, 'Pairs per real scan (one per yaw bin).')
+flags.DEFINE_list('sources', ['example/*.bin', 'kitti_object_velodyne/*.bin'],
+                  'Globs of the real scans, under --real.')
+flags.DEFINE_bool('submaps', False, 'The sources are submaps accumulated along a drive '
+                  "(RobotCar's test models): the second view is the place within --max_range "
+                  'of a displaced, turned centre, with no sensor-centred occlusion.')
+flags.DEFINE_float('max_range', rescan.RescanConfig.max_range,
+                   'Both views keep what lies within this many metres of their centre.')
 
 
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
-  sources = [p for sub in ('example', 'kitti_object_velodyne')
-             for p in sorted((Path(FLAGS.real) / sub).glob('*.bin'))]
+  sources = [p for pattern in FLAGS.sources for p in sorted(Path(FLAGS.real).glob(pattern))]
   if not sources:
-    raise SystemExit(f'error: {FLAGS.real}: no .bin scans in example/ or '
-                     'kitti_object_velodyne/ (set --real or SSD_JAX_SHARED_DATA)')
+    raise SystemExit(f'error: {FLAGS.real}: no scans match {",".join(FLAGS.sources)} '
+                     '(set --real or SSD_JAX_SHARED_DATA)')
+  if FLAGS.max_range <= 0:
+    raise SystemExit(f'error: --max_range must be > 0, got {FLAGS.max_range}')
+  cfg = rescan.RescanConfig(max_range=FLAGS.max_range, occlusion=not FLAGS.submaps)
   try:
     with tqdm.tqdm(total=len(sources) * FLAGS.pairs_per_cloud, desc='re-scan pairs',
                    unit='pair') as bar:
       rows = rescan.make_rescan_set(sources, FLAGS.out, FLAGS.seed, FLAGS.pairs_per_cloud,
-                                    progress=bar.update)
+                                    cfg, progress=bar.update)
   except (io.CloudFileError, ValueError) as e:
     raise SystemExit(f'error: {e}') from None
   print(f'wrote {FLAGS.out}: {len(rows)} pairs from {len(sources)} real scans')

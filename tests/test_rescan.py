@@ -1,5 +1,9 @@
 """Re-scan pairs from single real scans (ssd_jax.data.rescan)."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 from scipy import spatial
 
@@ -23,6 +27,23 @@ def test_rescan_pair_is_a_different_sampling_that_the_transform_aligns():
   assert np.median(spatial.cKDTree(cloud1).query(cloud2)[0]) > 0.3
 
 
+def test_second_submap_keeps_what_a_sensor_would_not_see():
+  """Submap pairs (occlusion off): the second view is the whole place within max_range
+  of a displaced centre, not what a sensor there would see."""
+  points = io.read_cloud(shared_path('example', 'oxford_270.bin'))
+  cfg = rescan.RescanConfig(max_range=30.0, occlusion=False)
+  cloud1, cloud2, t12 = rescan.rescan_pair(np.random.default_rng(0), points, 130.0, cfg)
+  occluded = rescan.rescan_pair(np.random.default_rng(0), points, 130.0,
+                                rescan.RescanConfig(max_range=30.0))[1]
+  assert np.linalg.norm(cloud2[:, :2], axis=1).max() <= 30.0 + 0.2   # grid + noise
+  assert len(cloud2) > 0.8 * len(cloud1) and len(cloud2) > 1.5 * len(occluded)
+  moved = cloud2 @ t12[:3, :3].T + t12[:3, 3]
+  dist, _ = spatial.cKDTree(cloud1).query(moved)
+  assert np.median(dist) < 0.1 and np.mean(dist < 1e-3) < 0.01
+  # Every second-view point lies within 30 m of the displaced centre in cloud 1's frame.
+  assert np.linalg.norm(moved[:, :2] - t12[:2, 3], axis=1).max() <= 30.0 + 0.2
+
+
 def test_rescan_set_is_deterministic_and_covers_every_yaw_bin(tmp_path):
   sources = [shared_path('kitti_object_velodyne', '000000.bin')]
   rows = rescan.make_rescan_set(sources, tmp_path / 'a', seed=3, pairs_per_cloud=8)
@@ -36,3 +57,20 @@ def test_rescan_set_is_deterministic_and_covers_every_yaw_bin(tmp_path):
   assert len(pairs) == 8
   bins = [learning_curve.yaw_bin(learning_curve.relative_yaw_deg(p.transform)) for p in pairs]
   assert sorted(bins) == [0, 0, 1, 1, 2, 2, 3, 3]
+
+
+def test_make_real_pairs_command_submaps_and_bad_flags(tmp_path):
+  real = shared_path()
+  run = lambda *args: subprocess.run(
+      [sys.executable, '-m', 'experiments.make_real_pairs', f'--real={real}', *args],
+      capture_output=True, text=True, cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+  out = run('--sources=example/oxford_*.bin', '--submaps', '--max_range=30',
+            '--pairs_per_cloud=2', f'--out={tmp_path / "sub"}')
+  assert out.returncode == 0, out.stderr[-2000:]
+  sources = (tmp_path / 'sub' / 'sources.tsv').read_text().splitlines()[1:]
+  assert len(sources) == 4 and all('\toxford_' in line for line in sources)
+  out = run('--sources=nothing/*.bin', f'--out={tmp_path / "x"}')
+  assert out.returncode == 1 and 'no scans match nothing/*.bin' in out.stderr
+  out = run('--max_range=0', f'--out={tmp_path / "y"}')
+  assert out.returncode == 1 and '--max_range must be > 0' in out.stderr
+  assert 'Traceback' not in out.stderr

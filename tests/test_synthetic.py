@@ -16,6 +16,8 @@ from ssd_jax.data import datasets, groundtruth, io
 from ssd_jax.synthetic import dataset, lidar, pushbroom, realism, scene as scene_lib
 from tests.conftest import shared_path, tiny_synthetic_config as tiny_config
 
+ROOT_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 
 @pytest.fixture(scope='module')
 def tiny_set(tmp_path_factory):
@@ -160,27 +162,31 @@ def test_oxford_style_models(tiny_set):
     c1, c2 = (io.read_cloud(root / 'test_models' / f'{i}.bin') for i in (p.idx1, p.idx2))
     assert c1.shape == c2.shape == (4096, 3)
     assert len(np.unique(c1, axis=0)) == len(c1)   # no repeated points, as the real models
-    assert np.linalg.norm(c1[:, :2], axis=1).max() < 30.0
+    assert np.linalg.norm(c1[:, :2], axis=1).max() <= 15.0   # crop_radius of the tiny set
     assert _overlap(c1, c2, p.transform) >= 0.4
   # models are randomly rotated: the relative yaw is not just the driving direction
   yaws = [np.degrees(np.arctan2(p.transform[1, 0], p.transform[0, 0])) for p in pairs]
   assert np.std(yaws) > 20
 
 
-def test_pushbroom_oxford_models_overlap_under_their_ground_truth(tmp_path):
+def test_spinning_oxford_variant_and_a_wrong_ground_truth(tiny_set, tmp_path):
   config = tiny_config()
   config.train.num_scenes = config.clusters.num_scenes = 0
-  config.test_oxford.sensor = 'pushbroom'
-  config.test_oxford.crop_radius = 15.0    # the tiny scene is 80 m long
-  config.test_oxford.spacing = 5.0
-  dataset.generate(config, tmp_path / 'pb')
-  root = tmp_path / 'pb' / 'test_oxford'
+  config.test_oxford.sensor = 'spinning'   # the models of the results before the switch
+  config.test_oxford.crop_radius, config.test_oxford.spacing = 30.0, 10.0
+  dataset.generate(config, tmp_path / 'spin')
+  root = tmp_path / 'spin' / 'test_oxford'
   pairs = groundtruth.read_groundtruths(root / 'groundtruths.txt')
   assert len(pairs) >= 3
   for p in pairs:
     c1, c2 = (io.read_cloud(root / 'test_models' / f'{i}.bin') for i in (p.idx1, p.idx2))
     assert c1.shape == c2.shape == (4096, 3) and len(np.unique(c1, axis=0)) == len(c1)
-    assert _overlap(c1, c2, p.transform) >= 0.4   # as test_oxford_style_models asks
+    assert _overlap(c1, c2, p.transform) >= 0.4
+  # One spinning scan, not lines accumulated along a pass: other models than the default's.
+  default = io.read_cloud(tiny_set / 'test_oxford' / 'test_models' / '0.bin')
+  assert not np.array_equal(default, io.read_cloud(root / 'test_models' / '0.bin'))
+  root = tiny_set / 'test_oxford'
+  pairs = groundtruth.read_groundtruths(root / 'groundtruths.txt')
   # A 5 degree yaw error in the ground truth loses overlap.
   c1, c2 = (io.read_cloud(root / 'test_models' / f'{i}.bin') for i in (pairs[0].idx1, pairs[0].idx2))
   wrong = geometry.make_transform(geometry.rotation_z(np.radians(5.0)), np.zeros(3)) @ pairs[0].transform
@@ -190,9 +196,14 @@ def test_pushbroom_oxford_models_overlap_under_their_ground_truth(tmp_path):
   with pytest.raises(dataset.SyntheticConfigError, match="test_oxford.sensor must be one of"):
     dataset.check_config(bad)
   short = tiny_config()
-  short.test_oxford.sensor = 'pushbroom'   # 80 m street, 30 m of margins, 60 m submaps
+  short.test_oxford.crop_radius = 30.0   # 80 m street, 30 m of margins, 60 m submaps
   with pytest.raises(dataset.SyntheticConfigError, match='holds no whole push-broom submap'):
     dataset.check_config(short)
+  empty = tiny_config()
+  for split in dataset.SPLITS:
+    empty[split].num_scenes = 0
+  with pytest.raises(dataset.SyntheticConfigError, match='nothing to generate'):
+    dataset.check_config(empty)
 
 
 def test_training_folder_reads_as_oxford_index(tiny_set):
@@ -253,7 +264,7 @@ def test_cli_reports_bad_config_without_traceback(tmp_path):
   proc = subprocess.run(
       [sys.executable, '-m', 'experiments.make_synthetic', f'--out={tmp_path / "x"}',
        '--config=configs/synthetic_small.py', '--config.clusters.num_pairs=3'],
-      capture_output=True, text=True, cwd=os.path.dirname(os.path.dirname(__file__)))
+      capture_output=True, text=True, cwd=ROOT_DIR)
   assert proc.returncode != 0
   assert 'error: clusters.num_pairs must be even' in proc.stderr
   assert 'Traceback' not in proc.stderr
@@ -293,6 +304,36 @@ def test_realism_statistics_on_constructed_scene():
   np.testing.assert_allclose(hist, [0.25, 0.25, 0, 0.25, 0, 0.25])
   front = realism.front_fov(np.array([[10.0, 0, 0], [-10.0, 0, 0], [10, 10, 0], [10, 0, -5]]))
   np.testing.assert_allclose(front, [[10.0, 0, 0]])
+
+
+def test_model_statistics_of_a_known_plane():
+  g = np.arange(-20.0, 20.0, 0.2)
+  xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+  plane = np.c_[xy, np.zeros(len(xy)), np.zeros((len(xy), 2)), np.ones(len(xy))]
+  stats = realism.model_statistics([plane], num_samples=300)
+  assert stats['points per model'] == len(plane)
+  assert stats['spacing median (m)'] == pytest.approx(0.2, abs=1e-6)
+  # pi r^2 / 0.04 m^2 grid points in a 2 m ball, fewer for probes near the edge.
+  assert 0.8 * np.pi * 4 / 0.04 < stats['points within 2 m (median)'] < 1.05 * np.pi * 4 / 0.04
+  assert stats['normals with abs(n_z) > 0.9'] == 1.0 and stats['normals with abs(n_z) < 0.3'] == 0.0
+  assert stats['planarity median'] > 0.9 and stats['height p5-p95 (m)'] == 0.0
+
+
+def test_oxford_realism_table_beside_the_real_models(synthetic_root):
+  real = shared_path()
+  md, stats = realism.compare_oxford_with_real(str(synthetic_root), str(real))
+  models = list((synthetic_root / 'test_oxford' / 'test_models').glob('*.bin'))
+  synthetic = stats['synthetic (mean over models)']
+  assert synthetic['models'] == len(models) and synthetic['points per model'] == 4096
+  real_cols = [k for k in stats if k.startswith('real oxford_')]
+  assert len(real_cols) == len(list((real / 'example').glob('oxford_*.bin'))) >= 1
+  for col in real_cols:   # RobotCar's models: 16,384 points on a 0.2 m grid within 30 m
+    assert stats[col]['points per model'] == 16384
+    assert 0.15 < stats[col]['spacing median (m)'] < 0.25
+    assert 25.0 < stats[col]['horizontal extent p95 (m)'] < 30.0
+  for s in stats.values():
+    assert 0 <= s['normals with abs(n_z) > 0.9'] + s['normals with abs(n_z) < 0.3'] <= 1
+  assert len(md.splitlines()) == 2 + len(synthetic)
 
 
 def test_realism_table_puts_synthetic_and_real_scans_side_by_side(synthetic_root):
@@ -349,3 +390,24 @@ def test_pushbroom_lines_on_a_known_street():
   np.testing.assert_allclose(shifted - pts, np.broadcast_to([0, 0.1, 0], pts.shape), atol=1e-6)
   with pytest.raises(ValueError, match='angular_step'):
     pushbroom.PushbroomModel(angular_step=0.0)
+
+
+def test_synthetic_report_covers_both_test_splits(synthetic_root, tmp_path):
+  real = shared_path()
+  out = subprocess.run([sys.executable, '-m', 'experiments.synthetic_report',
+                        f'--data={synthetic_root}', f'--real={real}', '--max_pairs=2',
+                        '--fpfh_max_nn=100', f'--out={tmp_path / "r.md"}'],
+                       capture_output=True, text=True, cwd=ROOT_DIR)
+  assert out.returncode == 0, out.stderr[-2000:]
+  report = (tmp_path / 'r.md').read_text()
+  for heading in ('Synthetic vs real KITTI scans', 'Synthetic vs real Oxford RobotCar test models',
+                  'Baselines on the synthetic Oxford-style pairs'):
+    assert heading in report
+  stats = json.loads((tmp_path / 'r.json').read_text())
+  assert set(stats['baseline_oxford']) == {'iss+fpfh', 'open3d'}
+  assert all(v['pairs'] == 2 for v in stats['baseline_oxford'].values())
+  assert len(stats['pairs_oxford']['open3d']) == 2
+  out = subprocess.run([sys.executable, '-m', 'experiments.synthetic_report',
+                        f'--data={tmp_path}'], capture_output=True, text=True, cwd=ROOT_DIR)
+  assert out.returncode == 1 and 'is not a synthetic dataset' in out.stderr
+  assert 'Traceback' not in out.stderr

@@ -146,6 +146,12 @@ def read_bin(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
 
   fmt: 'auto' (detect_bin_format) or a key of BIN_FORMATS. A named layout is still
   checked for values no point cloud holds (bytes of another type)."""
+  return read_bin_rows(path, fmt)[:, :3].copy()
+
+
+def read_bin_rows(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
+  """`read_bin` with every column of the layout: [N, 3 | 4 | 6] (xyz, then an intensity
+  or a unit normal)."""
   if fmt != 'auto' and fmt not in BIN_FORMATS:
     raise CloudFileError(f"unknown .bin format {fmt!r}; use 'auto' or one of {sorted(BIN_FORMATS)}")
   size = os.path.getsize(path)
@@ -170,7 +176,7 @@ def read_bin(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
     if problem:
       raise CloudFileError(f'{path}: read as {fmt!r} it holds {problem}: wrong --format?')
   dtype, width = BIN_FORMATS[fmt]
-  return np.ascontiguousarray(data.view(dtype).reshape(-1, width)[:, :3]).astype(
+  return np.ascontiguousarray(data.view(dtype).reshape(-1, width)).astype(
       np.dtype(dtype).newbyteorder('='))
 
 

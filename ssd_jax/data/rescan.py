@@ -1,4 +1,5 @@
-"""Registration pairs from single real scans: a re-scan from a displaced virtual sensor.
+"""Registration pairs from single real scans: a re-scan from a displaced virtual sensor
+(or, for submaps accumulated along a drive, a second submap of the place).
 
 No ground truth ships with the real clouds beside the project, and a pair made of a
 cloud and a rigidly moved copy of it is too easy (the same points, the same
@@ -37,6 +38,10 @@ class RescanConfig:
   noise_sigma: float = 0.02   # per-point Gaussian noise of each view
   hpr_radius_factor: float = 100.0   # HPR's flip radius, times the view's extent
   min_points: int = 2000      # a view with fewer points is redrawn
+  # False for clouds accumulated along a drive (RobotCar's push-broom submaps): they have
+  # no sensor at their origin and no sensor-centred occlusion, so the second view keeps
+  # everything within max_range of its displaced centre, as a second submap of the place.
+  occlusion: bool = True
 
 
 def _voxel_grid(rng: np.random.Generator, points: np.ndarray, size: float) -> np.ndarray:
@@ -69,12 +74,13 @@ def _view(rng: np.random.Generator, points: np.ndarray, cfg: RescanConfig) -> np
 def rescan_pair(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
                 cfg: RescanConfig = RescanConfig()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
   """(cloud1 [N1, 3], cloud2 [N2, 3], T_12 [4, 4]) from one scan points [N, 3] metres
-  centred on its sensor; the virtual sensor is turned by `yaw_deg` about z."""
+  centred on its sensor (or a submap centred on its origin, with cfg.occlusion False);
+  the virtual sensor is turned by `yaw_deg` about z."""
   for _ in range(20):
     r = rng.uniform(cfg.min_shift, cfg.max_shift)
     a = rng.uniform(-np.pi, np.pi)
     shift = np.array([r * np.cos(a), r * np.sin(a), 0.0])
-    seen = points[visible_from(points, shift, cfg.hpr_radius_factor)]
+    seen = points[visible_from(points, shift, cfg.hpr_radius_factor)] if cfg.occlusion else points
     c, s = np.cos(np.deg2rad(yaw_deg)), np.sin(np.deg2rad(yaw_deg))
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     cloud2 = _view(rng, (seen - shift) @ rot, cfg)   # row form of R^T (p - c)

@@ -84,9 +84,9 @@ def check_config(config) -> None:
   if config.clusters.num_pairs % 2:
     raise SyntheticConfigError(f'clusters.num_pairs must be even (half match), got '
                                f'{config.clusters.num_pairs}')
-  if config.train.num_scenes == 0 and config.test_kitti.num_scenes == 0:
-    raise SyntheticConfigError('nothing to generate: train.num_scenes and '
-                               'test_kitti.num_scenes are both 0')
+  if not any(config[split].num_scenes for split in SPLITS):
+    raise SyntheticConfigError('nothing to generate: num_scenes is 0 in every split ('
+                               + ', '.join(SPLITS) + ')')
   try:
     lidar.LidarModel.from_config(config.lidar)
   except (ValueError, TypeError) as e:
@@ -225,36 +225,51 @@ def _write_oxford_model(config, path: Path, points: np.ndarray, normals: np.ndar
   return rot
 
 
+def _pushbroom_drive(config, seq: int):
+  """Test scene `seq` driven down and back by the line scanner -> (seed, scene, the rng
+  the scan noise continues from, (true, reported, leg) line poses as
+  `pushbroom.line_poses`, centre lines of the models: every `spacing` metres of each
+  pass whose submap of 2 crop_radius metres lies wholly on the pass)."""
+  cfg = config.test_oxford
+  seed, scene, _ = _scene_and_poses(config, 'test_oxford', seq)
+  rng = np.random.default_rng((*seed, _PUSHBROOM_STREAM))
+  poses = pushbroom.line_poses(scene, rng, cfg.line_spacing, config.lidar.mount_height)
+  xyz, leg = poses[1][:, :3, 3], poses[2]
+  stride = max(1, int(round(cfg.spacing / cfg.line_spacing)))
+  centres = []
+  for side in (0, 1):
+    idx = np.flatnonzero(leg == side)
+    travelled = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(xyz[idx], axis=0), axis=1))])
+    full = (travelled >= cfg.crop_radius) & (travelled <= travelled[-1] - cfg.crop_radius)
+    centres += idx[full][::stride].tolist()
+  return seed, scene, rng, poses, centres
+
+
 def _write_test_oxford_pushbroom(config, out: Path, tick) -> int:
   """Oxford test models as RobotCar's: a line scanner's lines accumulated over
-  2 crop_radius metres of one traversal (`pushbroom`), a model every `spacing` metres of
-  each of the two passes down the street, pairs within pair_max_distance."""
+  2 crop_radius metres of one traversal (`pushbroom`) and cropped to crop_radius around
+  the centre line's position, a model every `spacing` metres of each of the two passes
+  down the street, pairs within pair_max_distance."""
   cfg, idx0, all_pairs = config.test_oxford, 0, []
   folder = out / 'test_oxford' / 'test_models'
   folder.mkdir(parents=True)
   sensor = pushbroom.PushbroomModel()
-  stride = max(1, int(round(cfg.spacing / cfg.line_spacing)))
   for seq in range(cfg.num_scenes):
-    seed, scene, _ = _scene_and_poses(config, 'test_oxford', seq)
-    rng = np.random.default_rng((*seed, _PUSHBROOM_STREAM))
-    true, reported, leg = pushbroom.line_poses(scene, rng, cfg.line_spacing,
-                                               config.lidar.mount_height)
+    seed, scene, rng, (true, reported, leg), centres = _pushbroom_drive(config, seq)
     points, _, lines = pushbroom.accumulate(lidar.Raycaster(scene), true, sensor, rng, reported)
     rot_rng = np.random.default_rng((*seed, _MODEL_ROTATION_STREAM))
     xyz, frames = reported[:, :3, 3], []
-    for side in (0, 1):
-      idx = np.flatnonzero(leg == side)
-      travelled = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(xyz[idx], axis=0), axis=1))])
-      full = (travelled >= cfg.crop_radius) & (travelled <= travelled[-1] - cfg.crop_radius)
-      for c in idx[full][::stride]:   # whole submaps only
-        sub = pushbroom.submap(points, lines, xyz, leg, c, cfg.crop_radius)
-        # In the frame the vehicle reported at the centre line, as the real models are.
-        local = (sub - reported[c, :3, 3]) @ reported[c, :3, :3]
-        pts, normals = process(config, local.astype(np.float32), cfg.voxel_size)
-        rot = _write_oxford_model(config, folder / f'{idx0 + len(frames)}.bin', pts, normals,
-                                  rot_rng, idx0 + len(frames))
-        frames.append(reported[c] @ geometry.make_transform(rot.T, np.zeros(3)))
-        tick()
+    for c in centres:
+      sub = pushbroom.submap(points, lines, xyz, leg, c, cfg.crop_radius)
+      # In the frame the vehicle reported at the centre line, as the real models are,
+      # and within crop_radius of it in the plane (the real models end at 30 m).
+      local = (sub - reported[c, :3, 3]) @ reported[c, :3, :3]
+      local = local[np.linalg.norm(local[:, :2], axis=1) <= cfg.crop_radius]
+      pts, normals = process(config, local.astype(np.float32), cfg.voxel_size)
+      rot = _write_oxford_model(config, folder / f'{idx0 + len(frames)}.bin', pts, normals,
+                                rot_rng, idx0 + len(frames))
+      frames.append(reported[c] @ geometry.make_transform(rot.T, np.zeros(3)))
+      tick()
     if not frames:   # check_config refuses such lengths; a curved street may still be short
       raise SyntheticConfigError(
           f'test_oxford scene {seq}: no whole push-broom submap of 2 x crop_radius = '
@@ -370,8 +385,11 @@ def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
 
 
 def count_scans(config) -> int:
-  """Scans the config will simulate (for the progress display)."""
-  return sum(len(_scene_and_poses(config, split, seq)[2])
+  """Scans (push-broom Oxford-style models) the config will simulate, for the progress
+  display."""
+  pushbroom_oxford = config.test_oxford.get('sensor', 'spinning') == 'pushbroom'
+  return sum(len(_pushbroom_drive(config, seq)[4]) if split == 'test_oxford' and pushbroom_oxford
+             else len(_scene_and_poses(config, split, seq)[2])
              for split in SPLITS for seq in range(config[split].num_scenes))
 
 

@@ -2,7 +2,9 @@
 
 The same functions run on both, so the comparison is apples to apples:
 points per scan, range histogram, ground fraction and local-shape (PCA
-eigenvalue) distributions in 1 m neighbourhoods.
+eigenvalue) distributions in 1 m neighbourhoods for KITTI-style scans; point
+spacing, neighbourhood sizes at the descriptor radii, local shape and the normals'
+directions for Oxford-style test models.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from scipy import spatial
 from ssd_jax.data import io
 from ssd_jax.synthetic import dataset
 
+COUNT_KEYS = ('scans', 'points per scan', 'models', 'points per model')
 RANGE_BINS = (0.0, 5.0, 10.0, 20.0, 40.0, 80.0, np.inf)
 # KITTI's object-benchmark scans keep what the front camera sees: azimuth within
 # ±41° and elevation above about -15° (measured on the scans beside the project).
@@ -112,10 +115,70 @@ def compare_with_real(data: str, real: str, stride: int) -> tuple[str, dict]:
           'real KITTI processed (0.2 m voxels)': real_proc,
           'synthetic processed (0.2 m voxels)': processed}
   stats = {name: scan_statistics(scans) if scans else None for name, scans in cols.items()}
+  return markdown_columns(stats), stats
+
+
+# Ball radii of the descriptors (the learned model's 2 m and 4 m variants, FPFH's 4 m).
+DESCRIPTOR_RADII = (2.0, 4.0)
+
+
+def model_statistics(models: list[np.ndarray], seed: int = 0,
+                     num_samples: int = 2000) -> dict[str, float]:
+  """Averages over Oxford-style test models [N_i, 6] (xyz metres + unit normals) or
+  [N_i, 3]: points, extent, nearest-neighbour spacing, points within the descriptor
+  radii, local shape, and the share of normals that are near vertical (|n_z| > 0.9:
+  ground, roofs) or near horizontal (|n_z| < 0.3: walls, poles)."""
+  rng = np.random.default_rng(seed)
+  rows = {k: [] for k in ('points per model', 'horizontal extent p95 (m)',
+                          'height p5-p95 (m)', 'spacing median (m)',
+                          *(f'points within {r:g} m (median)' for r in DESCRIPTOR_RADII),
+                          'planarity median', 'share planar (> 0.5)', 'share linear (> 0.5)',
+                          'normals with abs(n_z) > 0.9', 'normals with abs(n_z) < 0.3')}
+  for model in models:
+    xyz = np.asarray(model[:, :3], np.float64)
+    tree = spatial.cKDTree(xyz)
+    probe = xyz[rng.choice(len(xyz), min(num_samples, len(xyz)), replace=False)]
+    rows['points per model'].append(len(xyz))
+    rows['horizontal extent p95 (m)'].append(np.percentile(np.linalg.norm(xyz[:, :2], axis=1), 95))
+    rows['height p5-p95 (m)'].append(float(np.subtract(*np.percentile(xyz[:, 2], [95, 5]))))
+    rows['spacing median (m)'].append(np.median(tree.query(probe, k=2)[0][:, 1]))
+    for r in DESCRIPTOR_RADII:
+      rows[f'points within {r:g} m (median)'].append(
+          np.median(tree.query_ball_point(probe, r, return_length=True)))
+    shape = shape_features(xyz, rng, num_samples)
+    rows['planarity median'].append(np.median(shape['planarity']))
+    rows['share planar (> 0.5)'].append(np.mean(shape['planarity'] > 0.5))
+    rows['share linear (> 0.5)'].append(np.mean(shape['linearity'] > 0.5))
+    nz = np.abs(model[:, 5]) if model.shape[1] >= 6 else None
+    rows['normals with abs(n_z) > 0.9'].append(np.nan if nz is None else np.mean(nz > 0.9))
+    rows['normals with abs(n_z) < 0.3'].append(np.nan if nz is None else np.mean(nz < 0.3))
+  return {'models': len(models), **{k: float(np.mean(v)) for k, v in rows.items()}}
+
+
+def markdown_columns(stats: dict[str, dict | None]) -> str:
+  """Statistics of several sources side by side: {column: stats or None} -> Markdown."""
   keys = next(s for s in stats.values() if s)
-  lines = ['| statistic | ' + ' | '.join(cols) + ' |', '|---' * (len(cols) + 1) + '|']
+  lines = ['| statistic | ' + ' | '.join(stats) + ' |', '|---' * (len(stats) + 1) + '|']
   for key in keys:
-    cells = ['n/a' if s is None else (f'{s[key]:,.0f}' if key in ('scans', 'points per scan')
-                                      else f'{s[key]:.3f}') for s in stats.values()]
+    cells = ['n/a' if s is None else (f'{s[key]:,.0f}' if key in COUNT_KEYS else f'{s[key]:.3f}')
+             for s in stats.values()]
     lines.append(f'| {key} | ' + ' | '.join(cells) + ' |')
-  return '\n'.join(lines), stats
+  return '\n'.join(lines)
+
+
+def compare_oxford_with_real(data: str, real: str, stride: int = 1) -> tuple[str, dict]:
+  """`model_statistics` of every `stride`-th Oxford-style test model of the synthetic set
+  in `data` beside the real RobotCar test models under `real` (example/oxford_*.bin)
+  -> (Markdown table, stats). Each real model also gets its own column, so the table
+  shows the spread between real models."""
+  synthetic = [io.read_bin_rows(f, 'xyzn') for f in sorted(
+      glob.glob(os.path.join(data, 'test_oxford', 'test_models', '*.bin')),
+      key=lambda f: int(os.path.splitext(os.path.basename(f))[0]))[::stride]]
+  real_files = sorted(glob.glob(f'{real}/example/oxford_*.bin'))
+  stats = {f'real {os.path.basename(f)}': model_statistics([io.read_bin_rows(f, 'xyzn')])
+           for f in real_files}
+  stats['synthetic (mean over models)'] = model_statistics(synthetic) if synthetic else None
+  if not any(stats.values()):
+    raise FileNotFoundError(f'no Oxford-style models under {data}/test_oxford/test_models '
+                            f'or {real}/example')
+  return markdown_columns(stats), stats
