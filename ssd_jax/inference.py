@@ -5,10 +5,10 @@
     kp_idx, attention = inference.detect(model, cloud)            # 3DFeat-Net keypoints
 
 The network runs jitted on clusters of a fixed chunk size (the last chunk is
-padded and its outputs dropped). `describe` gathers each cluster's points on the
-host, so the network compiles once whatever the cloud's and keypoint set's size;
-the attention path and the dense ball query pad clouds to power-of-two size buckets
-(masked) and compile once per bucket. Neighbourhoods are PointNet++ ball queries (the first c
+padded and its outputs dropped). Each cluster's points are gathered on the host, so
+the network compiles once whatever the cloud's and keypoint set's size; the dense
+ball query pads clouds to power-of-two size buckets (masked) and compiles once per
+bucket. Neighbourhoods are PointNet++ ball queries (the first c
 points within r in index order, padded by repeating the first). Two paths give
 identical results:
   * 'kdtree': a host KD-tree (scipy) finds the neighbours, far faster on CPU for
@@ -158,36 +158,6 @@ def _dense_neighbourhoods(points, valid, centers, *, radius, num_samples):
   return grouping.ball_query(points, centers, radius, num_samples, valid)
 
 
-def _chunks(model: Model, points: np.ndarray, centers: np.ndarray, what: str, search: str,
-            chunk: int):
-  """Run the network on the clusters at `centers`, `chunk` at a time."""
-  if search not in SEARCHES:
-    raise ValueError(f'search must be one of {SEARCHES}, got {search!r}')
-  n = len(points)
-  size = _bucket(n)
-  padded = np.zeros((size, 3), np.float32)
-  padded[:n] = points
-  pts, valid = jnp.asarray(padded), jnp.asarray(np.arange(size) < n)
-  tree = spatial.cKDTree(points) if search == 'kdtree' else None
-  outputs = []
-  for start in range(0, len(centers), chunk):
-    ctr = np.zeros((chunk, 3), np.float32)
-    part = centers[start:start + chunk]
-    ctr[:len(part)] = part
-    if search == 'dense':
-      idx, has = _dense_neighbourhoods(pts, valid, jnp.asarray(ctr), radius=model.radius,
-                                       num_samples=model.num_samples)
-    else:   # query the real centers only; padded slots stay empty
-      idx = np.zeros((chunk, model.num_samples), np.int32)
-      has = np.zeros(chunk, bool)
-      idx[:len(part)], has[:len(part)] = kdtree_neighbourhoods(tree, part, model.radius,
-                                                               model.num_samples)
-    out = _run_on_groups(model.net, model.variables, pts, jnp.asarray(ctr), jnp.asarray(idx),
-                         jnp.asarray(has), radius=model.radius, what=what)
-    outputs.append(jax.tree.map(lambda a, m=len(part): np.asarray(a)[:m], out))
-  return outputs
-
-
 def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: str = 'kdtree',
              chunk: int = 256, seed: int = 0) -> np.ndarray:
   """Learned descriptors at keypoints.
@@ -200,20 +170,27 @@ def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: st
   """
   points = check_cloud(points)
   keypoints = check_cloud(keypoints, 'keypoints')
+  order_seeds = _order_seeds(model.draws, seed)
+  idx, has = _neighbourhoods(model, points, keypoints, search, order_seeds)
+  centers = np.tile(keypoints, (len(order_seeds), 1))
+  descriptors = _run_groups(model, points[idx], centers, has, chunk, 'describe')
+  return _mean_over_draws(descriptors, len(order_seeds))
+
+
+def _neighbourhoods(model: Model, points: np.ndarray, centers: np.ndarray, search: str,
+                    order_seeds: list) -> tuple[np.ndarray, np.ndarray]:
+  """The clusters at centers [K, 3] of every point order in `order_seeds` (draw-major):
+  idx [draws * K, c] original point indices, has_neighbour [draws * K] bool."""
   if search not in SEARCHES:
     raise ValueError(f'search must be one of {SEARCHES}, got {search!r}')
-  order_seeds = _order_seeds(model.draws, seed)
   if search == 'kdtree':
     balls = [np.asarray(b, np.int64) for b in spatial.cKDTree(points).query_ball_point(
-        keypoints, np.nextafter(model.radius, 0))]
+        centers, np.nextafter(model.radius, 0))]
     idx, has = zip(*(_first_in_order(balls, _permutation(len(points), s), model.num_samples)
                      for s in order_seeds))
   else:
-    idx, has = zip(*(_dense_first_in_order(model, points, keypoints, s) for s in order_seeds))
-  groups = points[np.concatenate(idx)]                            # [draws * K, c, 3]
-  centers = np.tile(keypoints, (len(order_seeds), 1))
-  return _mean_over_draws(_describe_groups(model, groups, centers, np.concatenate(has), chunk),
-                          len(order_seeds))
+    idx, has = zip(*(_dense_first_in_order(model, points, centers, s) for s in order_seeds))
+  return np.concatenate(idx), np.concatenate(has)
 
 
 def _order_seeds(draws: int, seed) -> list:
@@ -287,10 +264,11 @@ def _mean_over_draws(descriptors: np.ndarray, draws: int) -> np.ndarray:
   return (total / np.linalg.norm(total, axis=1, keepdims=True).clip(1e-12)).astype(np.float32)
 
 
-def _describe_groups(model: Model, groups: np.ndarray, centers: np.ndarray, has: np.ndarray,
-                     chunk: int) -> np.ndarray:
-  """The network on host-gathered clusters: groups [M, c, 3] metres, centers [M, 3],
-  has [M] bool -> descriptors [M, D], `chunk` clusters per call."""
+def _run_groups(model: Model, groups: np.ndarray, centers: np.ndarray, has: np.ndarray,
+                chunk: int, what: str):
+  """The network on host-gathered clusters, `chunk` at a time: groups [M, c, 3] metres,
+  centers [M, 3], has [M] bool -> descriptors [M, D] ('describe') or (attention [M],
+  orientation [M] radians) ('detect')."""
   c = model.num_samples
   # Each chunk is its own flat "cloud" of chunk * c points whose k-th cluster is rows
   # k*c ... k*c + c - 1, so the jitted network sees one static shape.
@@ -302,11 +280,15 @@ def _describe_groups(model: Model, groups: np.ndarray, centers: np.ndarray, has:
     ctr = np.zeros((chunk, 3), np.float32)
     hb = np.zeros(chunk, bool)
     pts[:m], ctr[:m], hb[:m] = groups[start:start + m], centers[start:start + m], has[start:start + m]
-    d = _run_on_groups(model.net, model.variables, jnp.asarray(pts.reshape(-1, 3)),
-                       jnp.asarray(ctr), flat_idx, jnp.asarray(hb), radius=model.radius,
-                       what='describe')
-    out.append(np.asarray(d)[:m])
-  return np.concatenate(out) if out else np.zeros((0, model.net.descriptor_dim), np.float32)
+    res = _run_on_groups(model.net, model.variables, jnp.asarray(pts.reshape(-1, 3)),
+                         jnp.asarray(ctr), flat_idx, jnp.asarray(hb), radius=model.radius,
+                         what=what)
+    out.append(jax.tree.map(lambda a, m=m: np.asarray(a)[:m], res))
+  if what == 'describe':
+    return np.concatenate(out) if out else np.zeros((0, model.net.descriptor_dim), np.float32)
+  if not out:
+    return np.zeros(0, np.float32), np.zeros(0, np.float32)
+  return np.concatenate([o[0] for o in out]), np.concatenate([o[1] for o in out])
 
 
 def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, chunk: int = 256,
@@ -334,8 +316,9 @@ def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, c
     for d, order_seed in enumerate(order_seeds):
       idx, h = _first_in_order(ball, _permutation(len(cloud), order_seed), c)
       groups[d, k], has[d, k] = cloud[idx[0]], h[0]
-  descriptors = _describe_groups(model, groups.reshape(-1, c, 3),
-                                 np.tile(centers, (len(order_seeds), 1)), has.reshape(-1), chunk)
+  descriptors = _run_groups(model, groups.reshape(-1, c, 3),
+                            np.tile(centers, (len(order_seeds), 1)), has.reshape(-1), chunk,
+                            'describe')
   return _mean_over_draws(descriptors, len(order_seeds))
 
 
@@ -346,9 +329,10 @@ def detect_at(model: Model, points: np.ndarray, centers: np.ndarray, search: str
   if not model.net.use_orientation:
     raise ValueError('this model has no detector: it was trained with '
                      'model.use_orientation=False (3DFeat-Net\'s descriptor pre-training)')
-  points = shuffled(check_cloud(points), seed)
-  parts = _chunks(model, points, check_cloud(centers, 'centers'), 'detect', search, chunk)
-  return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+  points = check_cloud(points)
+  centers = check_cloud(centers, 'centers')
+  idx, has = _neighbourhoods(model, points, centers, search, [seed])
+  return _run_groups(model, points[idx], centers, has, chunk, 'detect')
 
 
 def attention(model: Model, points: np.ndarray, search: str = 'kdtree', chunk: int = 2048,

@@ -66,9 +66,15 @@ def test_stream_of_clouds_compiles_the_network_once(model):
   assert inference._dense_neighbourhoods._cache_size() == dense_shapes
   inference.describe(model, _cloud(rng, 5000), _cloud(rng, 10), chunk=64, search='dense')
   assert inference._dense_neighbourhoods._cache_size() == dense_shapes + 1   # 8192 bucket
-  # The network sees host-gathered clusters: one shape whatever the cloud size.
+  # The network sees host-gathered clusters: one shape whatever the cloud size, for
+  # descriptors and attention alike.
   inference.describe(model, _cloud(rng, 9000), _cloud(rng, 130), chunk=64)
   assert inference._run_on_groups._cache_size() == network_shapes
+  inference.attention(model, _cloud(rng, 1500), chunk=256)
+  detect_shapes = inference._run_on_groups._cache_size()
+  att, ori = inference.attention(model, _cloud(rng, 5000), chunk=256)   # another size bucket
+  assert att.shape == ori.shape == (5000,)
+  assert inference._run_on_groups._cache_size() == detect_shapes
 
 
 def test_draws_sample_each_ball_as_a_shuffled_cloud_would():
