@@ -118,33 +118,6 @@ def _bucket(n: int, smallest: int = 1024) -> int:
   return max(smallest, 1 << (max(n, 1) - 1).bit_length())
 
 
-def shuffled(points: np.ndarray, seed: int = 0) -> np.ndarray:
-  """The cloud in a seeded random order (see the module docstring)."""
-  return points[_permutation(len(points), seed)]
-
-
-def kdtree_neighbourhoods(points: np.ndarray | spatial.cKDTree, centers: np.ndarray,
-                          radius: float, num_samples: int) -> tuple[np.ndarray, np.ndarray]:
-  """Host ball query with `grouping.ball_query` semantics.
-
-  points [N, 3] (or a cKDTree built on them, to reuse it across calls), centers
-  [K, 3] -> idx [K, c] int32, has_neighbour [K] bool.
-  """
-  tree = points if isinstance(points, spatial.cKDTree) else spatial.cKDTree(points)
-  # cKDTree tests d <= r; ball_query tests d^2 < r^2. Shrinking r by one ulp makes
-  # the boundary case agree.
-  lists = tree.query_ball_point(centers, np.nextafter(radius, 0), return_sorted=True)
-  idx = np.zeros((len(centers), num_samples), np.int32)
-  has = np.zeros(len(centers), bool)
-  for k, nb in enumerate(lists):
-    if nb:
-      take = nb[:num_samples]
-      idx[k, :len(take)] = take
-      idx[k, len(take):] = take[0]
-      has[k] = True
-  return idx, has
-
-
 @functools.partial(jax.jit, static_argnames=('net', 'radius', 'what'))
 def _run_on_groups(net, variables, points, centers, idx, has_nb, *, radius, what):
   clusters = grouping.group_points(points, centers, idx, has_nb, radius)
@@ -184,6 +157,8 @@ def _neighbourhoods(model: Model, points: np.ndarray, centers: np.ndarray, searc
   if search not in SEARCHES:
     raise ValueError(f'search must be one of {SEARCHES}, got {search!r}')
   if search == 'kdtree':
+    # cKDTree tests d <= r; ball_query tests d^2 < r^2. Shrinking r by one ulp makes
+    # the boundary case agree.
     balls = [np.asarray(b, np.int64) for b in spatial.cKDTree(points).query_ball_point(
         centers, np.nextafter(model.radius, 0))]
     idx, has = zip(*(_first_in_order(balls, _permutation(len(points), s), model.num_samples)
@@ -202,13 +177,15 @@ def _order_seeds(draws: int, seed) -> list:
 
 
 def _permutation(n: int, order_seed) -> np.ndarray:
-  """The order `shuffled(points, order_seed)` puts n points in: new position -> old index."""
+  """The seeded random order of n points (see the module docstring): new position -> old
+  index."""
   return np.random.default_rng(order_seed).permutation(n)
 
 
 def _first_in_order(balls: list[np.ndarray], perm: np.ndarray,
                     num_samples: int) -> tuple[np.ndarray, np.ndarray]:
-  """`kdtree_neighbourhoods` on the shuffled cloud, from balls found once on the original.
+  """The ball query on the shuffled cloud `points[perm]` (the first c members in that
+  order, `grouping.ball_query`'s rule), from balls found once on the original.
 
   balls: K arrays of point indices within the radius; perm [N] as `_permutation` ->
   idx [K, c] int64 original indices (the c members that come first in the shuffled

@@ -390,6 +390,14 @@ def test_pushbroom_lines_on_a_known_street():
   np.testing.assert_allclose(shifted - pts, np.broadcast_to([0, 0.1, 0], pts.shape), atol=1e-6)
   with pytest.raises(ValueError, match='angular_step'):
     pushbroom.PushbroomModel(angular_step=0.0)
+  # The checks both simulated sensors share (lidar.check_sensor_fields), named per field.
+  for sensor in (pushbroom.PushbroomModel, lidar.LidarModel):
+    with pytest.raises(ValueError, match='need 0 <= min_range < max_range, got 90'):
+      sensor(min_range=90.0)
+    with pytest.raises(ValueError, match=r'glass_dropout must be in \[0, 1\), got 1.0'):
+      sensor(glass_dropout=1.0)
+    with pytest.raises(ValueError, match='range_noise must be >= 0, got -0.1'):
+      sensor(range_noise=-0.1)
 
 
 def test_synthetic_report_covers_both_test_splits(synthetic_root, tmp_path):

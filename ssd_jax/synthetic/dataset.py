@@ -50,6 +50,12 @@ class SyntheticConfigError(ValueError):
   """A synthetic-data config value is out of range."""
 
 
+def _oxford_sensor(config) -> str:
+  """The Oxford-style split's sensor; a config from before the key was added (an older
+  set's manifest) made spinning-scan models."""
+  return config.test_oxford.get('sensor', ADDED_KEYS[('test_oxford', 'sensor')])
+
+
 def check_config(config) -> None:
   """Refuse values that would make an empty or meaningless dataset."""
   def positive(path, value, allow_zero=False):
@@ -66,11 +72,11 @@ def check_config(config) -> None:
   positive('normal_radius', config.normal_radius)
   positive('test_oxford.num_points', config.test_oxford.num_points)
   positive('test_oxford.voxel_size', config.test_oxford.voxel_size, allow_zero=True)
-  if config.test_oxford.get('sensor', 'spinning') not in OXFORD_SENSORS:
+  if _oxford_sensor(config) not in OXFORD_SENSORS:
     raise SyntheticConfigError(f'test_oxford.sensor must be one of {OXFORD_SENSORS}, got '
                                f'{config.test_oxford.sensor!r}')
   positive('test_oxford.line_spacing', config.test_oxford.get('line_spacing', 0.2))
-  if (config.test_oxford.get('sensor', 'spinning') == 'pushbroom' and config.test_oxford.num_scenes
+  if (_oxford_sensor(config) == 'pushbroom' and config.test_oxford.num_scenes
       and config.scene_length - 2 * trajectory.MARGIN < 2 * config.test_oxford.crop_radius):
     raise SyntheticConfigError(
         f'test_oxford: a pass of scene_length {config.scene_length} m (less '
@@ -286,7 +292,7 @@ def _write_test_oxford_pushbroom(config, out: Path, tick) -> int:
 
 def _write_test_oxford(config, out: Path, tick) -> int:
   """Oxford test models: cropped, a fixed point count, each in a random z-rotated frame."""
-  if config.test_oxford.get('sensor', 'spinning') == 'pushbroom':
+  if _oxford_sensor(config) == 'pushbroom':
     return _write_test_oxford_pushbroom(config, out, tick)
   cfg, idx0, all_pairs = config.test_oxford, 0, []
   folder = out / 'test_oxford' / 'test_models'
@@ -387,7 +393,7 @@ def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
 def count_scans(config) -> int:
   """Scans (push-broom Oxford-style models) the config will simulate, for the progress
   display."""
-  pushbroom_oxford = config.test_oxford.get('sensor', 'spinning') == 'pushbroom'
+  pushbroom_oxford = _oxford_sensor(config) == 'pushbroom'
   return sum(len(_pushbroom_drive(config, seq)[4]) if split == 'test_oxford' and pushbroom_oxford
              else len(_scene_and_poses(config, split, seq)[2])
              for split in SPLITS for seq in range(config[split].num_scenes))

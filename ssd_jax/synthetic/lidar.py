@@ -21,6 +21,19 @@ import numpy as np
 from ssd_jax.synthetic.scene import Label, Scene
 
 
+def check_sensor_fields(model, rates: tuple[str, ...], nonnegative: tuple[str, ...]) -> None:
+  """The checks every simulated sensor shares: 0 <= min_range < max_range (metres), the
+  `rates` fields in [0, 1), the `nonnegative` ones >= 0. Raises ValueError naming the field."""
+  if not 0 <= model.min_range < model.max_range:
+    raise ValueError(f'need 0 <= min_range < max_range, got {model.min_range}, {model.max_range}')
+  for name in rates:
+    if not 0 <= getattr(model, name) < 1:
+      raise ValueError(f'{name} must be in [0, 1), got {getattr(model, name)}')
+  for name in nonnegative:
+    if getattr(model, name) < 0:
+      raise ValueError(f'{name} must be >= 0, got {getattr(model, name)}')
+
+
 @dataclasses.dataclass(frozen=True)
 class LidarModel:
   """Scanner parameters; angles in degrees, distances in metres."""
@@ -46,14 +59,9 @@ class LidarModel:
                        f'lower_beams={self.lower_beams}')
     if not 0 < self.azimuth_step <= 45:
       raise ValueError(f'azimuth_step must be in (0, 45] degrees, got {self.azimuth_step}')
-    if not 0 <= self.min_range < self.max_range:
-      raise ValueError(f'need 0 <= min_range < max_range, got {self.min_range}, {self.max_range}')
-    for name in ('dropout', 'glass_dropout', 'foliage_dropout'):
-      if not 0 <= getattr(self, name) < 1:
-        raise ValueError(f'{name} must be in [0, 1), got {getattr(self, name)}')
-    for name in ('range_noise', 'beam_range_bias', 'beam_elevation_error', 'foliage_scatter'):
-      if getattr(self, name) < 0:
-        raise ValueError(f'{name} must be >= 0, got {getattr(self, name)}')
+    check_sensor_fields(self, ('dropout', 'glass_dropout', 'foliage_dropout'),
+                        ('range_noise', 'beam_range_bias', 'beam_elevation_error',
+                         'foliage_scatter'))
 
   @classmethod
   def from_config(cls, config) -> 'LidarModel':

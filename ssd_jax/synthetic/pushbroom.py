@@ -16,7 +16,7 @@ import dataclasses
 import numpy as np
 
 from ssd_jax.synthetic import trajectory
-from ssd_jax.synthetic.lidar import Raycaster
+from ssd_jax.synthetic.lidar import Raycaster, check_sensor_fields
 from ssd_jax.synthetic.scene import Label
 
 
@@ -41,13 +41,7 @@ class PushbroomModel:
     if not 0 < self.fov <= 360 or not 0 < self.angular_step <= self.fov:
       raise ValueError(f'need 0 < angular_step <= fov <= 360 degrees, got fov={self.fov}, '
                        f'angular_step={self.angular_step}')
-    if not 0 <= self.min_range < self.max_range:
-      raise ValueError(f'need 0 <= min_range < max_range, got {self.min_range}, {self.max_range}')
-    for name in ('dropout', 'glass_dropout'):
-      if not 0 <= getattr(self, name) < 1:
-        raise ValueError(f'{name} must be in [0, 1), got {getattr(self, name)}')
-    if self.range_noise < 0:
-      raise ValueError(f'range_noise must be >= 0, got {self.range_noise}')
+    check_sensor_fields(self, ('dropout', 'glass_dropout'), ('range_noise',))
 
   def angles(self) -> np.ndarray:
     """Beam angles [A] radians from straight down, towards +y first."""
