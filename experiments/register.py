@@ -263,7 +263,7 @@ def main(argv):
 
 def console():
   """The `ssd-jax-register` command (pyproject.toml)."""
-  cli.run(main)
+  cli.run(main, fast_exit=True)
 
 
 if __name__ == '__main__':

@@ -33,7 +33,7 @@ import ml_collections
 import numpy as np
 from scipy import spatial
 
-from ssd_jax import checkpoint, grouping, network
+from ssd_jax import grouping, network
 from ssd_jax.data.clean import check_cloud
 
 SEARCHES = ('kdtree', 'dense')
@@ -99,6 +99,9 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
   """The model of a training run: `checkpoint_dir` is its workdir or its `checkpoints/`.
   Only params and BatchNorm statistics are read; a damaged checkpoint is a
   `checkpoint.CheckpointError` naming its folder."""
+  # Only training runs need orbax, 0.2 s of a one-pair command's import time; shipped
+  # and exported models (`pretrained`) load without it.
+  from ssd_jax import checkpoint  # pylint: disable=g-import-not-at-top
   directory = checkpoint_directory(checkpoint_dir)
   ckpt = checkpoint.Checkpointer(directory, asynchronous=False)
   if ckpt.latest_step() is None:
@@ -118,12 +121,38 @@ def _bucket(n: int, smallest: int = 1024) -> int:
   return max(smallest, 1 << (max(n, 1) - 1).bit_length())
 
 
-@functools.partial(jax.jit, static_argnames=('net', 'radius', 'what'))
+# XLA:CPU hands dots, elementwise ops and reductions to YNNPACK one by one with this
+# setting; its default groups the whole descriptor branch of a 256-cluster chunk into
+# one library fusion that ran 1.4x slower on the 2-core VM (docs/benchmarks.md).
+_CPU_COMPILER_OPTIONS = {'xla_cpu_experimental_ynn_fusion_type': ','.join(
+    f'LIBRARY_FUSION_TYPE_{kind}' for kind in ('DOT', 'ELTWISE', 'REDUCE'))}
+
+
+def _compiler_options() -> dict | None:
+  """`_CPU_COMPILER_OPTIONS` on a CPU backend whose XLA knows them (the flag is
+  experimental), else None."""
+  if jax.default_backend() != 'cpu':
+    return None
+  try:
+    jax.jit(jnp.negative, compiler_options=_CPU_COMPILER_OPTIONS).lower(
+        np.zeros(1, np.float32)).compile()
+  except Exception:  # pylint: disable=broad-except  (XLA reports an unknown option as it can)
+    return None
+  return _CPU_COMPILER_OPTIONS
+
+
 def _run_on_groups(net, variables, points, centers, idx, has_nb, *, radius, what):
   clusters = grouping.group_points(points, centers, idx, has_nb, radius)
   if what == 'describe':
     return net.apply(variables, clusters, train=False)[0]
   return net.apply(variables, clusters, train=False, method=network.FeatureNet.detect)
+
+
+@functools.lru_cache(maxsize=None)
+def _network_kernel():
+  """`_run_on_groups` jitted with `_compiler_options()` (decided once per process)."""
+  return jax.jit(_run_on_groups, static_argnames=('net', 'radius', 'what'),
+                 compiler_options=_compiler_options())
 
 
 @functools.partial(jax.jit, static_argnames=('radius', 'num_samples'))
@@ -250,6 +279,7 @@ def _run_groups(model: Model, groups: np.ndarray, centers: np.ndarray, has: np.n
   # Each chunk is its own flat "cloud" of chunk * c points whose k-th cluster is rows
   # k*c ... k*c + c - 1, so the jitted network sees one static shape.
   flat_idx = jnp.arange(chunk * c, dtype=jnp.int32).reshape(chunk, c)
+  run_network = _network_kernel()
   out = []
   for start in range(0, len(groups), chunk):
     m = min(chunk, len(groups) - start)
@@ -257,7 +287,7 @@ def _run_groups(model: Model, groups: np.ndarray, centers: np.ndarray, has: np.n
     ctr = np.zeros((chunk, 3), np.float32)
     hb = np.zeros(chunk, bool)
     pts[:m], ctr[:m], hb[:m] = groups[start:start + m], centers[start:start + m], has[start:start + m]
-    res = _run_on_groups(model.net, model.variables, jnp.asarray(pts.reshape(-1, 3)),
+    res = run_network(model.net, model.variables, jnp.asarray(pts.reshape(-1, 3)),
                          jnp.asarray(ctr), flat_idx, jnp.asarray(hb), radius=model.radius,
                          what=what)
     out.append(jax.tree.map(lambda a, m=m: np.asarray(a)[:m], res))

@@ -24,6 +24,7 @@ from pathlib import Path
 import flax.serialization
 import jax
 import ml_collections
+import numpy as np
 
 from ssd_jax import inference, network
 
@@ -63,9 +64,11 @@ def load_export(path: str | os.PathLike) -> inference.Model:
     template = network.variables_template(config.model)
   except (OSError, ValueError, KeyError, AttributeError) as e:
     raise ValueError(f'{path / CONFIG_FILE}: not a readable model config ({e})') from None
-  template = jax.tree.map(lambda s: jax.numpy.zeros(s.shape, s.dtype), template)
+  # A numpy template: jnp.zeros would compile one fill kernel per weight shape.
+  template = jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), template)
   try:
-    variables = flax.serialization.from_bytes(template, (path / WEIGHTS_FILE).read_bytes())
+    variables = jax.device_put(
+        flax.serialization.from_bytes(template, (path / WEIGHTS_FILE).read_bytes()))
   except Exception as e:  # pylint: disable=broad-except  (msgpack raises many kinds)
     raise ValueError(f'{path / WEIGHTS_FILE}: damaged or not weights of this network '
                      f'({type(e).__name__}: {e})') from None

@@ -82,3 +82,33 @@ def test_cli_mistakes_end_in_one_line(tmp_path):
                          capture_output=True, text=True, timeout=300)
     assert out.returncode != 0 and message in out.stderr, (args, out.stderr[-2000:])
     assert 'Traceback' not in out.stderr
+
+
+_FAST_EXIT_SCRIPT = """
+import atexit, ctypes, sys
+from ssd_jax import cli
+def main(argv):
+  atexit.register(lambda: open(sys.argv[1], 'w').write('hook ran'))
+  ctypes.CDLL(None).printf(b'from C, buffered\\n')
+  print('from Python')
+  if 'fail' in argv[1:]:
+    raise SystemExit('error: asked to fail')
+cli.run(main, fast_exit=True)
+"""
+
+
+def test_fast_exit_keeps_atexit_hooks_and_buffered_output(tmp_path):
+  """`cli.run(fast_exit=True)` skips the interpreter's teardown but still runs the
+  atexit hooks and flushes C's stdout buffer (a pipe here, so fully buffered); a failing
+  command exits the usual way, with its message and status."""
+  script = tmp_path / 'fast_exit_command.py'
+  script.write_text(_FAST_EXIT_SCRIPT)
+  out = subprocess.run([sys.executable, str(script), str(tmp_path / 'hook')], cwd=ROOT,
+                       capture_output=True, text=True, timeout=120)
+  assert out.returncode == 0, out.stderr[-2000:]
+  assert 'from C, buffered' in out.stdout and 'from Python' in out.stdout
+  assert (tmp_path / 'hook').read_text() == 'hook ran'
+  out = subprocess.run([sys.executable, str(script), str(tmp_path / 'hook2'), 'fail'],
+                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+  assert out.returncode == 1 and out.stderr.strip().endswith('error: asked to fail')
+  assert (tmp_path / 'hook2').read_text() == 'hook ran'

@@ -3,6 +3,7 @@
 import dataclasses
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy import spatial
@@ -60,7 +61,7 @@ def test_stream_of_clouds_compiles_the_network_once(model):
   rng = np.random.default_rng(2)
   inference.describe(model, _cloud(rng, 1500), _cloud(rng, 40), chunk=64)
   inference.describe(model, _cloud(rng, 1500), _cloud(rng, 40), chunk=64, search='dense')
-  network_shapes = inference._run_on_groups._cache_size()
+  network_shapes = inference._network_kernel()._cache_size()
   dense_shapes = inference._dense_neighbourhoods._cache_size()
   for n, k in [(1100, 10), (1800, 64), (2000, 100), (1300, 3)]:   # all in the 2048 bucket
     out = inference.describe(model, _cloud(rng, n), _cloud(rng, k), chunk=64, search='dense')
@@ -71,12 +72,30 @@ def test_stream_of_clouds_compiles_the_network_once(model):
   # The network sees host-gathered clusters: one shape whatever the cloud size, for
   # descriptors and attention alike.
   inference.describe(model, _cloud(rng, 9000), _cloud(rng, 130), chunk=64)
-  assert inference._run_on_groups._cache_size() == network_shapes
+  assert inference._network_kernel()._cache_size() == network_shapes
   inference.attention(model, _cloud(rng, 1500), chunk=256)
-  detect_shapes = inference._run_on_groups._cache_size()
+  detect_shapes = inference._network_kernel()._cache_size()
   att, ori = inference.attention(model, _cloud(rng, 5000), chunk=256)   # another size bucket
   assert att.shape == ori.shape == (5000,)
-  assert inference._run_on_groups._cache_size() == detect_shapes
+  assert inference._network_kernel()._cache_size() == detect_shapes
+
+
+def test_cpu_compiler_options_leave_the_network_outputs_unchanged(model):
+  """The network kernel's YNNPACK setting changes how XLA:CPU runs it, not what it
+  computes: the same clusters give the same descriptors and detector outputs."""
+  assert inference._compiler_options() == inference._CPU_COMPILER_OPTIONS
+  rng = np.random.default_rng(4)
+  pts = _cloud(rng, 4000)
+  groups = pts[rng.integers(0, 4000, (300, 16))]
+  centers, has = groups[:, 0].copy(), np.ones(300, bool)
+  plain = jax.jit(inference._run_on_groups, static_argnames=('net', 'radius', 'what'))
+  for what in ('describe', 'detect'):
+    args = (model.net, model.variables, jnp.asarray(groups.reshape(-1, 3)), jnp.asarray(centers),
+            jnp.arange(300 * 16, dtype=jnp.int32).reshape(300, 16), jnp.asarray(has))
+    tuned = inference._network_kernel()(*args, radius=model.radius, what=what)
+    reference = plain(*args, radius=model.radius, what=what)
+    for a, b in zip(jax.tree.leaves(tuned), jax.tree.leaves(reference)):
+      np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=2e-5)
 
 
 def test_draws_sample_each_ball_as_a_shuffled_cloud_would():
