@@ -1,14 +1,15 @@
 r"""Registration speed in the three regimes a user meets, against Open3D's own pipeline.
 
     python -m experiments.benchmark_registration --dataset=data_cache/real_pairs \
-        [--num_pairs=100] [--cold_pairs=3] [--methods=fpfh,learned,open3d] [--draws=4,1]
+        [--num_pairs=100] [--cold_pairs=3] [--draws=4,1] \
+        [--methods=fpfh,learned,open3d_paper,open3d_tutorial]
 
 On the same pairs, for the project's ISS + FPFH, the project's ISS + learned (`ours`,
-one row per --draws setting) and a plain Open3D pipeline as its tutorial writes it
-(`ssd_jax.registration.reference`: Open3D's ISS with the paper's parameters, FPFH within
-4 m and at most 100 neighbours on 1 m / 30-neighbour normals, nearest-neighbour
+one row per --draws setting) and a plain Open3D pipeline (`ssd_jax.registration.reference`:
+Open3D's ISS with the paper's parameters, normals and FPFH, nearest-neighbour
 correspondences, `registration_ransac_based_on_correspondence` at 1 m, 99 %, <= 10,000
-trials):
+trials) with the paper's searches (normals and FPFH within 4 m, no neighbour cap) and
+with its tutorial's (1 m / 30-neighbour normals, FPFH capped at 100 neighbours):
 
   * cold: one pair per new process, the command a user types (wall time of the whole
     command, JAX import and compilation included; the project's persistent
@@ -36,7 +37,7 @@ from ssd_jax import cli, pretrained
 from ssd_jax.data import benchmarks, clean, io
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import features, metrics, pipeline
-from ssd_jax.registration.reference import open3d_register
+from ssd_jax.registration.reference import SETTINGS, open3d_register
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('dataset', 'data_cache/synthetic_small/test_kitti', 'Registration set.')
@@ -45,11 +46,15 @@ flags.DEFINE_integer('cold_pairs', 3, 'Pairs timed as one new process each.')
 flags.DEFINE_integer('fpfh_max_nn', features.FPFH_MAX_NN, "The project's FPFH neighbour cap.")
 flags.DEFINE_list('draws', [], 'Learned rows: one per value, describing with this many '
                   "samplings of each ball (default: the shipped model's own setting).")
-flags.DEFINE_list('methods', ['fpfh', 'learned', 'open3d'], 'Rows: fpfh (the project\'s '
-                  'ISS + FPFH), learned (ISS + ours), open3d (the plain Open3D pipeline).')
+flags.DEFINE_list('methods', ['fpfh', 'learned', 'open3d_paper', 'open3d_tutorial'],
+                  "Rows: fpfh (the project's ISS + FPFH), learned (ISS + ours), open3d_paper "
+                  "and open3d_tutorial (the plain Open3D pipeline with the paper's or its "
+                  "tutorial's normal and FPFH searches).")
 
+OPEN3D = {f'open3d_{settings}': settings for settings in SETTINGS}
 NAMES = {'fpfh': 'project ISS + FPFH', 'learned': 'project ISS + learned',
-         'open3d': 'Open3D ISS + FPFH + RANSAC'}
+         'open3d_paper': "Open3D's pipeline, the paper's searches",
+         'open3d_tutorial': "Open3D's pipeline, its tutorial's searches"}
 
 
 def _read(path) -> np.ndarray:
@@ -59,8 +64,9 @@ def _read(path) -> np.ndarray:
 def _runner(method: str, model):
   """-> run(path1, path2, cache, seed) -> (T_12, {stage: seconds}). The project's methods
   keep each cloud's features in `cache` ({path: features}) unless it is None."""
-  if method == 'open3d':
-    return lambda path1, path2, cache, seed: open3d_register(_read(path1), _read(path2), seed)
+  if method in OPEN3D:
+    return lambda path1, path2, cache, seed: open3d_register(_read(path1), _read(path2), seed,
+                                                             OPEN3D[method])
   descriptor = method
 
   def features_of(path, cache, seed):
@@ -82,12 +88,13 @@ def _runner(method: str, model):
 
 def _cold(method: str, pair, draws: int) -> float:
   """Wall seconds of one pair in a new process."""
-  if method == 'open3d':
+  if method in OPEN3D:
     # A plain script: Open3D, numpy and the file reader, none of the project's JAX code.
     code = ('import sys; from ssd_jax.data import io; '
             'from ssd_jax.registration.reference import open3d_register; '
-            'open3d_register(io.read_cloud(sys.argv[1]), io.read_cloud(sys.argv[2]))')
-    cmd = [sys.executable, '-c', code, str(pair.cloud1), str(pair.cloud2)]
+            'open3d_register(io.read_cloud(sys.argv[1]), io.read_cloud(sys.argv[2]), '
+            'settings=sys.argv[3])')
+    cmd = [sys.executable, '-c', code, str(pair.cloud1), str(pair.cloud2), OPEN3D[method]]
   else:
     cmd = [sys.executable, '-m', 'experiments.register', f'--cloud1={pair.cloud1}',
            f'--cloud2={pair.cloud2}', f'--fpfh_max_nn={FLAGS.fpfh_max_nn}',

@@ -85,10 +85,15 @@ def test_cli_mistakes_end_in_one_line(tmp_path):
 
 
 _FAST_EXIT_SCRIPT = """
-import atexit, ctypes, sys
+import atexit, ctypes, sys, threading, time
 from ssd_jax import cli
+def late_write():
+  time.sleep(0.3)
+  open(sys.argv[1] + '.thread', 'w').write('thread done')
 def main(argv):
   atexit.register(lambda: open(sys.argv[1], 'w').write('hook ran'))
+  if 'thread' in argv[1:]:
+    threading.Thread(target=late_write).start()
   ctypes.CDLL(None).printf(b'from C, buffered\\n')
   print('from Python')
   if 'fail' in argv[1:]:
@@ -100,7 +105,7 @@ cli.run(main, fast_exit=True)
 def test_fast_exit_keeps_atexit_hooks_and_buffered_output(tmp_path):
   """`cli.run(fast_exit=True)` skips the interpreter's teardown but still runs the
   atexit hooks and flushes C's stdout buffer (a pipe here, so fully buffered); a failing
-  command exits the usual way, with its message and status."""
+  command, or one that leaves a non-daemon thread running, exits the usual way."""
   script = tmp_path / 'fast_exit_command.py'
   script.write_text(_FAST_EXIT_SCRIPT)
   out = subprocess.run([sys.executable, str(script), str(tmp_path / 'hook')], cwd=ROOT,
@@ -112,3 +117,6 @@ def test_fast_exit_keeps_atexit_hooks_and_buffered_output(tmp_path):
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
   assert out.returncode == 1 and out.stderr.strip().endswith('error: asked to fail')
   assert (tmp_path / 'hook2').read_text() == 'hook ran'
+  out = subprocess.run([sys.executable, str(script), str(tmp_path / 'hook3'), 'thread'],
+                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+  assert out.returncode == 0 and (tmp_path / 'hook3.thread').read_text() == 'thread done'

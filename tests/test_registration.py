@@ -204,9 +204,12 @@ def test_pipeline_refuses_bad_clouds_with_one_line():
 def test_open3d_reference_pipeline_registers_a_pair_and_refuses_a_flat_one(synthetic_root):
   pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
   c1, c2 = (io.read_cloud(p) for p in (pair.cloud1, pair.cloud2))
-  t, seconds = reference.open3d_register(c1, c2)
-  assert metrics.registration_errors(pair.transform, t)['success']
-  assert set(seconds) == {'features', 'matching', 'ransac'} and min(seconds.values()) >= 0
+  for settings in ('paper', 'tutorial'):
+    t, seconds = reference.open3d_register(c1, c2, settings=settings)
+    assert metrics.registration_errors(pair.transform, t)['success']
+    assert set(seconds) == {'features', 'matching', 'ransac'} and min(seconds.values()) >= 0
+  with pytest.raises(ValueError, match="settings must be one of"):
+    reference.open3d_register(c1, c2, settings='pcl')
   flat = np.c_[np.random.default_rng(0).uniform(-10, 10, (2000, 2)), np.zeros(2000)]
   with pytest.raises(ValueError, match='too few ISS keypoints'):
     reference.open3d_register(flat, flat)

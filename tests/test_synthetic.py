@@ -412,9 +412,9 @@ def test_synthetic_report_covers_both_test_splits(synthetic_root, tmp_path):
                   'Baselines on the synthetic Oxford-style pairs'):
     assert heading in report
   stats = json.loads((tmp_path / 'r.json').read_text())
-  assert set(stats['baseline_oxford']) == {'iss+fpfh', 'open3d'}
+  assert set(stats['baseline_oxford']) == {'iss+fpfh', 'open3d_paper', 'open3d_tutorial'}
   assert all(v['pairs'] == 2 for v in stats['baseline_oxford'].values())
-  assert len(stats['pairs_oxford']['open3d']) == 2
+  assert len(stats['pairs_oxford']['open3d_paper']) == 2
   out = subprocess.run([sys.executable, '-m', 'experiments.synthetic_report',
                         f'--data={tmp_path}'], capture_output=True, text=True, cwd=ROOT_DIR)
   assert out.returncode == 1 and 'is not a synthetic dataset' in out.stderr
