@@ -53,8 +53,7 @@ flags.DEFINE_list('methods', ['fpfh', 'learned', 'open3d_paper', 'open3d_tutoria
 
 OPEN3D = {f'open3d_{settings}': settings for settings in SETTINGS}
 NAMES = {'fpfh': 'project ISS + FPFH', 'learned': 'project ISS + learned',
-         'open3d_paper': "Open3D's pipeline, the paper's searches",
-         'open3d_tutorial': "Open3D's pipeline, its tutorial's searches"}
+         **{m: f"Open3D's pipeline, {SETTINGS[s].label}" for m, s in OPEN3D.items()}}
 
 
 def _read(path) -> np.ndarray:

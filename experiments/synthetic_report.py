@@ -29,8 +29,6 @@ from ssd_jax.registration.reference import SETTINGS, open3d_register
 from ssd_jax.synthetic import dataset, realism
 
 FLAGS = flags.FLAGS
-OPEN3D_ROWS = {'paper': "the paper's searches (4 m normals and FPFH, no cap)",
-               'tutorial': "its tutorial's searches (FPFH <= 100 neighbours)"}
 flags.DEFINE_string('data', 'data_cache/synthetic_small', 'A make_synthetic output directory.')
 flags.DEFINE_string('real', os.environ.get('SSD_JAX_SHARED_DATA', '../shared/data'),
                     'Real data root with kitti_object_velodyne/ and example/.')
@@ -67,7 +65,7 @@ def baseline_table(split_dir: str, max_pairs: int, max_nn: int, paper_set: str,
     s = metrics.summarize(plain)
     summaries[f'open3d_{settings}'] = {**s, 'seconds': time.perf_counter() - start}
     results[f'open3d_{settings}'] = plain
-    table.append([f'Open3D pipeline, {OPEN3D_ROWS[settings]}', s['pairs'],
+    table.append([f'Open3D pipeline, {SETTINGS[settings].label}', s['pairs'],
                   tables.fmt(s['rte'], 3), tables.fmt(s['rre'], 3),
                   tables.fmt(s['rre_geodesic'], 3), tables.fmt(100 * s['success_rate']), '-',
                   '-'])

@@ -288,8 +288,8 @@ def _run_groups(model: Model, groups: np.ndarray, centers: np.ndarray, has: np.n
     hb = np.zeros(chunk, bool)
     pts[:m], ctr[:m], hb[:m] = groups[start:start + m], centers[start:start + m], has[start:start + m]
     res = run_network(model.net, model.variables, jnp.asarray(pts.reshape(-1, 3)),
-                         jnp.asarray(ctr), flat_idx, jnp.asarray(hb), radius=model.radius,
-                         what=what)
+                      jnp.asarray(ctr), flat_idx, jnp.asarray(hb), radius=model.radius,
+                      what=what)
     out.append(jax.tree.map(lambda a, m=m: np.asarray(a)[:m], res))
   if what == 'describe':
     return np.concatenate(out) if out else np.zeros((0, model.net.descriptor_dim), np.float32)

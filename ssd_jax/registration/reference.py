@@ -30,18 +30,22 @@ from ssd_jax.registration import features, keypoints, matching
 
 @dataclasses.dataclass(frozen=True)
 class SearchSettings:
-  """Normal and FPFH neighbourhoods: radii in metres, max_nn None for radius-only."""
+  """Normal and FPFH neighbourhoods: radii in metres, max_nn None for radius-only; label
+  names the setting in tables."""
   normal_radius: float
   normal_max_nn: int | None
   fpfh_radius: float
   fpfh_max_nn: int | None
   orient_to_origin: bool
+  label: str
 
 
 SETTINGS = {
-    'paper': SearchSettings(4.0, None, features.FPFH_RADIUS, None, True),
+    'paper': SearchSettings(4.0, None, features.FPFH_RADIUS, None, True,
+                            "the paper's searches (4 m normals and FPFH, no cap)"),
     'tutorial': SearchSettings(features.NORMAL_RADIUS, features.NORMAL_MAX_NN,
-                               features.FPFH_RADIUS, 100, False),
+                               features.FPFH_RADIUS, 100, False,
+                               "its tutorial's searches (FPFH <= 100 neighbours)"),
 }
 
 
