@@ -146,11 +146,13 @@ def run(main: Callable[[list[str]], None], fast_exit: bool = False) -> None:
   try:
     app.run(with_cache, flags_parser=parse_flags)
   except SystemExit as e:
-    waited_for = [t for t in threading.enumerate()   # threads a normal exit would join
-                  if not t.daemon and t is not threading.main_thread()]
-    if fast_exit and e.code in (None, 0) and not waited_for:
+    if fast_exit and e.code in (None, 0) and not _threads_a_normal_exit_joins():
       _exit_without_teardown()
     raise
+
+
+def _threads_a_normal_exit_joins() -> list[threading.Thread]:
+  return [t for t in threading.enumerate() if not t.daemon and t is not threading.main_thread()]
 
 
 def _exit_without_teardown() -> None:
@@ -159,7 +161,8 @@ def _exit_without_teardown() -> None:
   atexit._run_exitfuncs()  # pylint: disable=protected-access  (CPython's own exit step)
   sys.stdout.flush()
   sys.stderr.flush()
-  ctypes.CDLL(None).fflush(None)   # C/C++ libraries' buffered stdout (Open3D's messages)
+  if os.name == 'posix':   # the C library of the process itself, as dlopen(NULL) gives it
+    ctypes.CDLL(None).fflush(None)   # C/C++ libraries' buffered stdout (Open3D's messages)
   os._exit(0)
 
 

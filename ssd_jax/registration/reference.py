@@ -41,7 +41,7 @@ class SearchSettings:
 
 
 SETTINGS = {
-    'paper': SearchSettings(4.0, None, features.FPFH_RADIUS, None, True,
+    'paper': SearchSettings(features.FPFH_RADIUS, None, features.FPFH_RADIUS, None, True,
                             "the paper's searches (4 m normals and FPFH, no cap)"),
     'tutorial': SearchSettings(features.NORMAL_RADIUS, features.NORMAL_MAX_NN,
                                features.FPFH_RADIUS, 100, False,
