@@ -51,6 +51,13 @@ def get_config() -> ml_collections.ConfigDict:
   model.branch_dropout = 0.0
   model.branch_crop_shift = 0.0
   model.branch_crop_radius = 20.0
+  # Another sensor in one branch (0 = never): with chance branch_sensor_rate a branch keeps
+  # only the rings of a sparser spinning unit (beams branch_beam_spacing degrees apart),
+  # with chance branch_fov_rate only a horizontal sector of branch_fov degrees.
+  model.branch_sensor_rate = 0.0
+  model.branch_beam_spacing = (0.7, 2.5)
+  model.branch_fov_rate = 0.0
+  model.branch_fov = (90.0, 180.0)
   model.jitter_sigma = 0.01      # metres
   model.jitter_clip = 0.05       # metres
   model.bn_momentum = 0.99
@@ -83,5 +90,7 @@ def get_config() -> ml_collections.ConfigDict:
   train.keep_checkpoints = 3
   # A finished run whose descriptor weights (and BatchNorm statistics) start this one;
   # the detector is freshly initialised (3DFeat-Net's second stage).
-  train.init_from = ''
+  train.init_from = ''       # a shipped name, export or run to start from
+  # What init_from gives: descriptor (3DFeat-Net's stage 2) | model (every weight: fine-tune).
+  train.init_scope = 'descriptor'
   return config

@@ -65,7 +65,7 @@ def _runner(method: str, model):
   keep each cloud's features in `cache` ({path: features}) unless it is None."""
   if method in OPEN3D:
     return lambda path1, path2, cache, seed: open3d_register(_read(path1), _read(path2), seed,
-                                                             OPEN3D[method])
+                                                             OPEN3D[method])[:2]
   descriptor = method
 
   def features_of(path, cache, seed):

@@ -8,13 +8,10 @@ A MODEL_CARD.md already in OUT is kept; write one (data, config, steps, wall tim
 machine, command, results) for every model you share.
 """
 
-import dataclasses
-
 from absl import app
 from absl import flags
-import ml_collections
 
-from ssd_jax import checkpoint, cli, inference, pretrained
+from ssd_jax import cli, pretrained
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('run', None, 'Training workdir.')
@@ -29,21 +26,11 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   try:
-    model = inference.load(FLAGS.run, FLAGS.step)
-    ckpt = checkpoint.Checkpointer(inference.checkpoint_directory(FLAGS.run), asynchronous=False)
-    config = ml_collections.ConfigDict(ckpt.restore_config(model.step))
-    ckpt.close()
-    if 'inference' not in config:   # runs from before the section describe as they trained
-      config.inference = ml_collections.ConfigDict({'num_samples': 0, 'draws': 1})
-    config.inference.num_samples = FLAGS.num_samples or config.inference.num_samples
-    config.inference.draws = FLAGS.draws or config.inference.draws
-    model = dataclasses.replace(inference.Model.from_config(config, model.variables),
-                                step=model.step)
-    out = pretrained.export(model, config, FLAGS.out)
-    pretrained.load_export(out)   # what was written loads back
+    model = pretrained.export_run(FLAGS.run, FLAGS.out, FLAGS.step, FLAGS.num_samples,
+                                  FLAGS.draws)
   except (FileNotFoundError, ValueError) as e:
     raise SystemExit(f'error: {e}') from None
-  print(f'exported step {model.step} of {FLAGS.run} to {out}')
+  print(f'exported step {model.step} of {FLAGS.run} to {FLAGS.out}')
 
 
 def console():

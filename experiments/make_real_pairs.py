@@ -5,6 +5,10 @@ from a displaced, turned virtual sensor; `ssd_jax.data.rescan`).
     # pairs like RobotCar's test pairs: two submaps of each real Oxford test model
     python -m experiments.make_real_pairs --sources=example/oxford_*.bin --submaps \
         --max_range=30 --pairs_per_cloud=24 --out=data_cache/real_oxford_submaps
+    # the second view by a 16-beam unit 10-20 m away (experiments.make_cross_sensor makes
+    # the whole unit x distance set)
+    python -m experiments.make_real_pairs --sensor=vlp16 --min_shift=10 --max_shift=20 \
+        --out=data_cache/real_pairs_vlp16
 
 Every scan matching --sources (default: every `.bin` under REAL/example and
 REAL/kitti_object_velodyne) gives --pairs_per_cloud
@@ -19,7 +23,7 @@ from absl import app
 from absl import flags
 from tqdm import auto as tqdm
 
-from ssd_jax import cli
+from ssd_jax import cli, sensors
 from ssd_jax.data import io, rescan
 
 FLAGS = flags.FLAGS
@@ -33,6 +37,12 @@ flags.DEFINE_list('sources', ['example/*.bin', 'kitti_object_velodyne/*.bin'],
 flags.DEFINE_bool('submaps', False, 'The sources are submaps accumulated along a drive '
                   "(RobotCar's test models): the second view is the place within --max_range "
                   'of a displaced, turned centre, with no sensor-centred occlusion.')
+flags.DEFINE_string('sensor', '', 'Re-scan the second view with this unit (ssd_jax/sensors.py: '
+                    'vlp16, hdl32, hdl64, vls128, front120): only what its beams return.')
+flags.DEFINE_float('min_shift', rescan.RescanConfig.min_shift,
+                   'Nearest standpoint of the second view, metres.')
+flags.DEFINE_float('max_shift', rescan.RescanConfig.max_shift,
+                   'Farthest standpoint of the second view, metres.')
 flags.DEFINE_float('max_range', rescan.RescanConfig.max_range,
                    'Both views keep what lies within this many metres of their centre.')
 
@@ -46,7 +56,17 @@ def main(argv):
                      '(set --real or SSD_JAX_SHARED_DATA)')
   if FLAGS.max_range <= 0:
     raise SystemExit(f'error: --max_range must be > 0, got {FLAGS.max_range}')
-  cfg = rescan.RescanConfig(max_range=FLAGS.max_range, occlusion=not FLAGS.submaps)
+  if not 0 <= FLAGS.min_shift <= FLAGS.max_shift:
+    raise SystemExit(f'error: need 0 <= --min_shift <= --max_shift, got {FLAGS.min_shift}, '
+                     f'{FLAGS.max_shift}')
+  try:
+    if FLAGS.sensor:
+      sensors.get(FLAGS.sensor)
+  except ValueError as e:
+    raise SystemExit(f'error: --sensor: {e}') from None
+  cfg = rescan.RescanConfig(max_range=FLAGS.max_range, occlusion=not FLAGS.submaps,
+                            sensor=FLAGS.sensor, min_shift=FLAGS.min_shift,
+                            max_shift=FLAGS.max_shift)
   try:
     with tqdm.tqdm(total=len(sources) * FLAGS.pairs_per_cloud, desc='re-scan pairs',
                    unit='pair') as bar:

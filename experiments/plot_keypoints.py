@@ -42,7 +42,7 @@ def main(argv):
     raise SystemExit(f'error: {e}') from None
   shown = {}
   for source in FLAGS.sources:
-    idx = pipeline.compute_keypoints(points, source, model)
+    idx, _ = pipeline.compute_keypoints(points, source, model)
     shown[f'{source} keypoints'] = points[idx]
     print(f'{source}: {len(idx)} keypoints')
   viz.plot_keypoints(points, shown, FLAGS.out)

@@ -1,7 +1,7 @@
 r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into cloud 1's frame.
 
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin \
-        [--keypoints=iss|learned|random] [--descriptor=fpfh|learned|learned,fpfh] \
+        [--keypoints=auto|iss|learned|random] [--descriptor=fpfh|learned|learned,fpfh] \
         [--checkpoint=ours|RUN_DIR|EXPORT_DIR] [--groundtruth=DIR/groundtruths.txt] \
         [--icp] [--draws=N] [--json=OUT.json] [--plot=OUT.png]
     # many pairs in one process: a list of pairs, or the consecutive scans of a folder
@@ -42,7 +42,14 @@ flags.DEFINE_string('cloud1', None, 'Target cloud (its frame is the output frame
 flags.DEFINE_string('cloud2', None, 'Source cloud, mapped into cloud 1 by T_12.')
 flags.DEFINE_enum('format', 'auto', ['auto', *io.BIN_FORMATS],
                   '.bin layout (float32 rows; *64: float64 rows); auto refuses to guess.')
-flags.DEFINE_enum('keypoints', 'iss', pipeline.KEYPOINTS, 'Keypoint detector.')
+flags.DEFINE_enum('keypoints', 'auto', pipeline.KEYPOINTS,
+                  'Keypoint detector. auto: 1,024 farthest-point keypoints (found again across '
+                  'sensors and standpoints); iss: the paper\'s ISS, on a cloud too sparse for '
+                  'it wider ISS radii, then farthest-point keypoints (says which).')
+flags.DEFINE_enum('ransac', 'upright', pipeline.ESTIMATORS,
+                  "RANSAC's motion model: rigid (3-point samples, any rotation: the paper's) "
+                  'or upright (2-point samples of a turn about z and a shift, for scans whose '
+                  'z axis is up; refit in 6 degrees of freedom).')
 flags.DEFINE_list('descriptor', ['fpfh'], 'Descriptor(s): fpfh, learned; a list runs each.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model name, export folder or training workdir '
                     'for learned (default: the shipped ours / ours_detector).')
@@ -125,12 +132,20 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
   gt_pairs = groundtruth.read_groundtruths(FLAGS.groundtruth) if FLAGS.groundtruth else None
   features, errors = {}, []
 
+  def read(path):
+    return clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
+
   def features_of(path):   # each cloud once (a few kB): scan i serves pairs i-1 and i
     if path not in features:
-      points = clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
-      features[path] = pipeline.features_anywhere(points, FLAGS.keypoints, descriptor, model,
-                                                  FLAGS.seed, FLAGS.fpfh_max_nn)
+      features[path] = pipeline.features_anywhere(read(path), FLAGS.keypoints, descriptor,
+                                                  model, FLAGS.seed, FLAGS.fpfh_max_nn)
+      if features[path].note:
+        tqdm.tqdm.write(f'{os.path.basename(path)}: {features[path].note}')
     return features[path]
+
+  def fallback_features(path):
+    return pipeline.features_anywhere(read(path), 'auto', descriptor, model, FLAGS.seed,
+                                      FLAGS.fpfh_max_nn)
 
   transforms = []
   with open(os.path.join(FLAGS.out, 'registrations.csv'), 'w', newline='') as f:
@@ -140,18 +155,30 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
                      'rte', 'rre', 'success', 'error'])
     for cloud1, cloud2 in tqdm.tqdm(pairs, desc='registration', unit='pair'):
       start = time.perf_counter()
-      f1, f2 = features_of(cloud1), features_of(cloud2)
       try:
-        reg = pipeline.estimate(f1, f2, FLAGS.seed)
+        f1, f2 = features_of(cloud1), features_of(cloud2)
+        try:
+          reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac)
+        except ValueError as e:
+          if FLAGS.keypoints != 'iss':
+            raise
+          # As pipeline.register: keypoints spread over both clouds, this pair only.
+          f1, f2 = (fallback_features(c) for c in (cloud1, cloud2))
+          tqdm.tqdm.write(f'{os.path.basename(cloud1)} / {os.path.basename(cloud2)}: {e}; '
+                          'registered again with farthest-point keypoints')
+          reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac)
         t, inliers, trials, error = reg.transform, int(reg.inliers.sum()), reg.trials, ''
-      except ValueError as e:   # too few keypoints: a failed pair, not a failed run
-        t, inliers, trials, error = np.eye(4), 0, 0, str(e)
+        keypoints = (len(f1.xyz), len(f2.xyz))
+      except (io.CloudFileError, clean.CloudDataError):
+        raise   # a bad file ends the run, named
+      except ValueError as e:   # too few keypoints, a flat cloud: a failed pair, not a failed run
+        t, inliers, trials, error, keypoints = np.eye(4), 0, 0, str(e), (0, 0)
       transforms.append(t)
       errors.append(bool(error))
       t_gt = (_ground_truth(FLAGS.groundtruth, cloud1, cloud2, False, gt_pairs)
               if gt_pairs is not None else None)
       gt = metrics.registration_errors(t_gt, t) if t_gt is not None else {}
-      writer.writerow([cloud1, cloud2, len(f1.xyz), len(f2.xyz), inliers, trials,
+      writer.writerow([cloud1, cloud2, *keypoints, inliers, trials,
                        f'{time.perf_counter() - start:.3f}', *t.ravel().tolist(),
                        gt.get('rte', ''), gt.get('rre', ''), gt.get('success', ''), error])
       f.flush()   # a stopped run keeps the pairs it registered
@@ -220,13 +247,16 @@ def main(argv):
     try:
       start = time.perf_counter()
       reg, f1, f2 = pipeline.register(clouds[0], clouds[1], FLAGS.keypoints, descriptor, model,
-                                      FLAGS.seed, FLAGS.fpfh_max_nn, icp=FLAGS.icp)
+                                      FLAGS.seed, FLAGS.fpfh_max_nn, icp=FLAGS.icp,
+                                      estimator=FLAGS.ransac)
     except ValueError as e:
       raise SystemExit(f'error: {e}') from None
     transform = reg.transform
     out = {'keypoints': FLAGS.keypoints, 'descriptor': descriptor,
            'num_keypoints': [len(f1.xyz), len(f2.xyz)], 'inliers': int(reg.inliers.sum()),
            'trials': reg.trials, 'model': checkpoint if descriptor == 'learned' else None,
+           'notes': reg.notes, 'fitness': reg.fitness, 'inlier_rmse': reg.inlier_rmse,
+           'correspondence_set_size': reg.correspondence_set_size,
            'draws': model.draws if descriptor == 'learned' else None,
            'seconds': {**{f'cloud1_{k}': v for k, v in f1.seconds.items()},
                        **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds}}
@@ -238,9 +268,12 @@ def main(argv):
     if t_gt is not None:
       out['errors'] = metrics.registration_errors(t_gt, transform)
     results.append(out)
+    for note in reg.notes:
+      print(f'keypoints: {note}')
     print(f'== {FLAGS.keypoints} keypoints + {descriptor} descriptors: '
           f'{out["num_keypoints"][0]} / {out["num_keypoints"][1]} keypoints, '
-          f'{out["inliers"]} inliers, {out["trials"]} RANSAC trials, '
+          f'{out["inliers"]} inliers, {out["trials"]} RANSAC trials, fitness '
+          f'{reg.fitness:.3f}, inlier RMSE {reg.inlier_rmse:.3f} m, '
           f'{out["seconds"]["total"]:.2f} s')
     print('timings (s): ' + ', '.join(f'{k} {v:.2f}' for k, v in out['seconds'].items()))
     print('T_12 =\n' + np.array2string(transform, precision=4, suppress_small=True))

@@ -59,7 +59,7 @@ def baseline_table(split_dir: str, max_pairs: int, max_nn: int, paper_set: str,
     for n, pair in enumerate(tqdm.tqdm(pairs, desc=f'Open3D pipeline ({settings})', unit='pair')):
       clouds = [clean.clean_cloud(io.read_cloud(p), str(p), np.float64)
                 for p in (pair.cloud1, pair.cloud2)]
-      t, _ = open3d_register(*clouds, seed=n, settings=settings)
+      t, _, _ = open3d_register(*clouds, seed=n, settings=settings)
       # Open3D does not report its trial count.
       plain.append({**metrics.registration_errors(pair.transform, t), 'trials': float('nan')})
     s = metrics.summarize(plain)

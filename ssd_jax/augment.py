@@ -102,3 +102,42 @@ def rotate_1d(key: jax.Array, points: jax.Array) -> jax.Array:
   """Rotate1D: a uniform random rotation about z per cloud."""
   phi = jax.random.uniform(key, points.shape[:1], points.dtype, -jnp.pi, jnp.pi)
   return points @ jnp.swapaxes(geometry.rotation_z(phi), -1, -2)
+
+
+def _per_cloud_chance(key: jax.Array, b: int, rate: float) -> jax.Array:
+  """[B, 1] bool: which clouds of a batch get an augmentation applied with chance `rate`."""
+  return (jax.random.uniform(key, (b, 1)) < rate)
+
+
+def beam_resample(key: jax.Array, points: jax.Array, valid: jax.Array, rate: float,
+                  spacing: tuple[float, float], width: float = 0.2) -> jax.Array:
+  """Re-sample a cloud to a sparser spinning LiDAR's beam pattern: valid [B, N] -> [B, N].
+
+  With chance `rate` per cloud, draw a beam spacing uniformly in `spacing` (degrees of
+  elevation between neighbouring beams, e.g. 2 for a VLP-16, 1.33 for an HDL-32E) and a
+  random phase, and keep only the points within `width` degrees of a virtual beam. The
+  elevation is seen from the sensor at the origin, where the clouds are centred, so a
+  64-beam scan turns into rings as far apart as a 16- or 32-beam unit's.
+  """
+  k_on, k_s, k_phase = jax.random.split(key, 3)
+  b = points.shape[0]
+  s = jax.random.uniform(k_s, (b, 1), minval=spacing[0], maxval=spacing[1])
+  phase = jax.random.uniform(k_phase, (b, 1))
+  elev = jnp.degrees(jnp.arctan2(points[..., 2], jnp.linalg.norm(points[..., :2], axis=-1)))
+  frac = jnp.mod(elev / s - phase, 1.0)
+  near = jnp.minimum(frac, 1.0 - frac) * s <= width
+  return valid & (near | ~_per_cloud_chance(k_on, b, rate))
+
+
+def fov_crop(key: jax.Array, points: jax.Array, valid: jax.Array, rate: float,
+             fov: tuple[float, float]) -> jax.Array:
+  """A limited horizontal field of view (a front-facing or solid-state unit): with chance
+  `rate` per cloud, keep the points within a sector of width drawn uniformly in `fov`
+  degrees around a random heading. valid [B, N] -> [B, N]."""
+  k_on, k_w, k_h = jax.random.split(key, 3)
+  b = points.shape[0]
+  half = 0.5 * jnp.radians(jax.random.uniform(k_w, (b, 1), minval=fov[0], maxval=fov[1]))
+  heading = jax.random.uniform(k_h, (b, 1), minval=-jnp.pi, maxval=jnp.pi)
+  az = jnp.arctan2(points[..., 1], points[..., 0]) - heading
+  inside = jnp.abs(jnp.arctan2(jnp.sin(az), jnp.cos(az))) <= half
+  return valid & (inside | ~_per_cloud_chance(k_on, b, rate))

@@ -60,6 +60,14 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'model.branch_crop_shift must be >= 0 metres, got {m.branch_crop_shift}')
   require(m.branch_crop_radius > 0,
           f'model.branch_crop_radius must be > 0 metres, got {m.branch_crop_radius}')
+  for rate in ('branch_sensor_rate', 'branch_fov_rate'):
+    require(0 <= m[rate] <= 1, f'model.{rate} must be in [0, 1], got {m[rate]}')
+  for field, lo in (('branch_beam_spacing', 0.0), ('branch_fov', 0.0)):
+    span = tuple(m[field])
+    require(len(span) == 2 and lo < span[0] <= span[1],
+            f'model.{field} must be (low, high) degrees with 0 < low <= high, got {span}')
+  require(m.branch_fov[1] <= 360, f'model.branch_fov must be within 360 degrees, got '
+          f'{tuple(m.branch_fov)}')
   require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
   require(d.num_points >= m.num_clusters,
           f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '
@@ -73,6 +81,8 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
   require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
   require(t.get('lr_schedule', 'constant') in LR_SCHEDULES,   # runs from before it: constant
           f'train.lr_schedule must be one of {LR_SCHEDULES}, got {t.lr_schedule!r}')
+  require(t.get('init_scope', 'descriptor') in ('descriptor', 'model'),
+          f"train.init_scope must be 'descriptor' or 'model', got {t.get('init_scope')!r}")
   require(t.num_steps >= 1, f'train.num_steps must be >= 1, got {t.num_steps}')
   require(t.log_every >= 1 and t.checkpoint_every >= 1 and t.eval_every >= 1,
           'train.log_every, train.eval_every and train.checkpoint_every must be >= 1')
@@ -84,7 +94,9 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
 
 ADDED_MODEL_KEYS = {'triplet_hinge': 'cluster', 'attention_normalization': 'softmax',
                     'self_rotation': 'gaussian', 'orientation_head': 'mlp',
-                    'branch_dropout': 0.0, 'branch_crop_shift': 0.0, 'branch_crop_radius': 20.0}
+                    'branch_dropout': 0.0, 'branch_crop_shift': 0.0, 'branch_crop_radius': 20.0,
+                    'branch_sensor_rate': 0.0, 'branch_beam_spacing': [0.7, 2.5],
+                    'branch_fov_rate': 0.0, 'branch_fov': [90.0, 180.0]}
 TRIPLET_ONLY_KEYS = ('triplet_hinge', 'attention_normalization')
 
 

@@ -46,17 +46,39 @@ def _apply(model, variables, clusters, train):
 
 def resample_branch(key: jax.Array, points: jax.Array, valid: jax.Array,
                     cfg: ml_collections.ConfigDict) -> jax.Array:
-  """The points one branch keeps, valid [B, N] -> [B, N]: `cfg.branch_dropout` (max share
-  dropped) and `cfg.branch_crop_shift` / `cfg.branch_crop_radius` (metres; a crop around
-  an offset sensor). Points are given in the unrotated frame, so the crop of PC2 is drawn
-  in PC1's frame: the same thing as a crop drawn after the rotation."""
-  k_drop, k_crop = jax.random.split(key)
+  """The points one branch keeps, valid [B, N] -> [B, N], so that the two branches differ
+  as two scans of a place do:
+
+    * `cfg.branch_dropout` (max share dropped) and `cfg.branch_crop_shift` /
+      `cfg.branch_crop_radius` (metres; a crop around an offset sensor): another
+      sampling, another standpoint;
+    * `cfg.branch_sensor_rate` (chance per cloud) with `cfg.branch_beam_spacing`
+      (degrees): another, sparser beam pattern (`augment.beam_resample`);
+    * `cfg.branch_fov_rate` with `cfg.branch_fov` (degrees): a limited horizontal field
+      of view (`augment.fov_crop`).
+
+  A sensor change that would leave a cloud fewer than `MIN_BRANCH_POINTS` points is not
+  applied to it. Points are given in the unrotated frame, so the crop of PC2 is drawn in
+  PC1's frame: the same thing as a crop drawn after the rotation."""
+  k_drop, k_crop, k_beam, k_fov = jax.random.split(key, 4)
   if cfg.get('branch_dropout', 0.0) > 0:
     valid = augment.point_dropout(k_drop, valid, cfg.branch_dropout)
   if cfg.get('branch_crop_shift', 0.0) > 0:
     valid = augment.crop_around_offset(k_crop, points, valid, cfg.branch_crop_shift,
                                        cfg.branch_crop_radius)
-  return valid
+  sensor = valid
+  if cfg.get('branch_sensor_rate', 0.0) > 0:
+    sensor = augment.beam_resample(k_beam, points, sensor, cfg.branch_sensor_rate,
+                                   tuple(cfg.branch_beam_spacing))
+  if cfg.get('branch_fov_rate', 0.0) > 0:
+    sensor = augment.fov_crop(k_fov, points, sensor, cfg.branch_fov_rate, tuple(cfg.branch_fov))
+  enough = jnp.sum(sensor, axis=1, keepdims=True) >= MIN_BRANCH_POINTS
+  return jnp.where(enough, sensor, valid)
+
+
+# Fewer points than this in a branch after a simulated sensor change keep the branch as it
+# was: a branch with a handful of clusters gives CF no rotation to recover.
+MIN_BRANCH_POINTS = 512
 
 
 def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,

@@ -76,6 +76,27 @@ def load_export(path: str | os.PathLike) -> inference.Model:
   return dataclasses.replace(model, step=record.get('step'))
 
 
+def export_run(run: str | os.PathLike, out: str | os.PathLike, step: int | None = None,
+               num_samples: int = 0, draws: int = 0, card: str = '') -> inference.Model:
+  """Export checkpoint `step` (default: the latest) of training run `run` to folder `out`,
+  optionally describing with `num_samples` points x `draws` samplings of each ball (0:
+  the run's own setting), and check that it loads back. -> the exported model."""
+  # Orbax only here and in training: loading a shipped or exported model never imports it.
+  from ssd_jax import checkpoint  # pylint: disable=g-import-not-at-top
+  model = inference.load(run, step)
+  ckpt = checkpoint.Checkpointer(inference.checkpoint_directory(run), asynchronous=False)
+  config = ml_collections.ConfigDict(ckpt.restore_config(model.step))
+  ckpt.close()
+  if 'inference' not in config:   # runs from before the section describe as they trained
+    config.inference = ml_collections.ConfigDict({'num_samples': 0, 'draws': 1})
+  config.inference.num_samples = num_samples or config.inference.num_samples
+  config.inference.draws = draws or config.inference.draws
+  model = dataclasses.replace(inference.Model.from_config(config, model.variables),
+                              step=model.step)
+  load_export(export(model, config, out, card))   # what was written loads back
+  return model
+
+
 def resolve(name_or_path: str | os.PathLike) -> str:
   """A shipped name -> its folder; anything else is returned unchanged."""
   return str(WEIGHTS_DIR / name_or_path) if str(name_or_path) in SHIPPED else str(name_or_path)

@@ -23,7 +23,8 @@ import numpy as np
 import optax
 from tqdm import auto as tqdm
 
-from ssd_jax import checkpoint, config_checks, distributed, inference, network, objective
+from ssd_jax import (checkpoint, config_checks, distributed, inference, network, objective,
+                     pretrained)
 from ssd_jax.config_checks import ConfigError
 from ssd_jax.data import datasets
 
@@ -219,22 +220,33 @@ def _check_finite(pending: list[tuple[int, dict]], ckpt: checkpoint.Checkpointer
 
 
 # Model keys added after runs were written, with the value those runs used.
+INIT_SCOPES = ('descriptor', 'model')
+
+
 def initialize_from(state: TrainState, source: str,
                     config: ml_collections.ConfigDict) -> TrainState:
-  """3DFeat-Net's stage hand-over: `state` (fresh) with the descriptor weights and
-  BatchNorm statistics of the run in `source`; the detector keeps its fresh
-  initialisation and the optimizer starts anew."""
+  """`state` (fresh) with weights and BatchNorm statistics of `source` (a shipped name, an
+  export folder or a training run), the optimizer started anew.
+
+  `config.train.init_scope` says which: 'descriptor' is 3DFeat-Net's stage hand-over (the
+  detector keeps its fresh initialisation); 'model' copies every weight, to fine-tune a
+  trained model (e.g. the shipped `ours` on a user's own sensor)."""
+  scope = config.train.get('init_scope', 'descriptor')
   try:
-    src = inference.load(source).variables
-  except FileNotFoundError as e:
+    src = pretrained.load(source).variables
+  except (FileNotFoundError, ValueError) as e:
     raise ConfigError(f'train.init_from: {e}') from None
-  if src['params']['descriptor'].keys() != state.params['descriptor'].keys() or any(
-      a.shape != b.shape for a, b in zip(jax.tree.leaves(src['params']['descriptor']),
-                                         jax.tree.leaves(state.params['descriptor']))):
-    raise ConfigError(f'train.init_from: {source} has a different descriptor '
-                      '(model.descriptor_dim must match)')
-  params = {**state.params, 'descriptor': src['params']['descriptor']}
-  batch_stats = {**state.batch_stats, 'descriptor': src['batch_stats']['descriptor']}
+  parts = ['descriptor'] if scope == 'descriptor' else list(state.params)
+  for part in parts:
+    mine, theirs = state.params.get(part), src['params'].get(part)
+    if theirs is None or jax.tree.structure(mine) != jax.tree.structure(theirs) or any(
+        a.shape != b.shape for a, b in zip(jax.tree.leaves(theirs), jax.tree.leaves(mine))):
+      raise ConfigError(f'train.init_from: {source} has a different {part} network (the '
+                        'model settings, e.g. model.descriptor_dim or model.orientation_head, '
+                        'must match)')
+  params = {**state.params, **{p: src['params'][p] for p in parts}}
+  batch_stats = {**state.batch_stats,
+                 **{p: src['batch_stats'][p] for p in parts if p in src['batch_stats']}}
   return state.replace(params=params, batch_stats=batch_stats,
                        opt_state=create_optimizer(config).init(params))
 
@@ -292,7 +304,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
     logging.info('Resumed from step %d in %s', int(state.step), ckpt.directory)
   elif t_cfg.get('init_from'):
     state = replicate(initialize_from(jax.device_get(state), t_cfg.init_from, config), mesh)
-    logging.info('Descriptor initialised from %s', t_cfg.init_from)
+    logging.info('%s initialised from %s', t_cfg.get('init_scope', 'descriptor'), t_cfg.init_from)
   start = int(state.step)
   writer = MetricsWriter(os.path.join(workdir, 'metrics.jsonl'), start, distributed.is_main())
   step_fn = jit_train_step(config, mesh)

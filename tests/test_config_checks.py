@@ -21,6 +21,11 @@ def test_config_errors_name_the_value(tiny_config):
            ('model.branch_dropout', 1.0, r'branch_dropout must be in \[0, 0.9\]'),
            ('model.branch_crop_shift', -1.0, 'branch_crop_shift must be >= 0'),
            ('model.branch_crop_radius', 0.0, 'branch_crop_radius must be > 0'),
+           ('model.branch_sensor_rate', 1.5, r'branch_sensor_rate must be in \[0, 1\]'),
+           ('model.branch_fov_rate', -0.1, r'branch_fov_rate must be in \[0, 1\]'),
+           ('model.branch_beam_spacing', (2.0, 1.0), 'branch_beam_spacing must be'),
+           ('model.branch_fov', (90.0, 400.0), 'branch_fov must be within 360'),
+           ('train.init_scope', 'detector', "init_scope must be 'descriptor' or 'model'"),
            ('train.lr_schedule', 'step', "lr_schedule must be one of .*'step'")]
   for field, value, message in cases:
     config = tiny_config.copy_and_resolve_references()

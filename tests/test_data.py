@@ -121,9 +121,14 @@ def test_truncated_real_file_is_reported(tmp_path):
 def test_missing_and_unsupported_files(tmp_path):
   with pytest.raises(io.CloudFileError, match='no such file'):
     io.read_cloud(tmp_path / 'nope.bin')
-  (tmp_path / 'x.las').write_bytes(b'1234')
+  (tmp_path / 'x.e57').write_bytes(b'1234')
   with pytest.raises(io.CloudFileError, match='unsupported file type'):
-    io.read_cloud(tmp_path / 'x.las')
+    io.read_cloud(tmp_path / 'x.e57')
+  for name, content, message in (('junk.las', b'1234', 'not a readable LAS/LAZ file'),
+                                 ('empty.laz', b'', 'file is empty')):
+    (tmp_path / name).write_bytes(content)
+    with pytest.raises(io.CloudFileError, match=message):
+      io.read_cloud(tmp_path / name)
   np.save(tmp_path / 'two.npy', np.zeros((5, 2)))
   with pytest.raises(io.CloudFileError, match=r'expected an \[N, >=3\] array'):
     io.read_cloud(tmp_path / 'two.npy')

@@ -266,3 +266,37 @@ def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
   assert out.returncode == 1
   assert out.stderr.strip().splitlines()[-1] == (
       f"error: {tmp_path / 'bad.txt'}, line 1: expected \"cloud1 cloud2\", got 'a.bin b.bin c.bin'")
+
+
+def test_las_and_laz_register_like_the_same_points_in_ply(tiny_set, tmp_path):
+  import laspy  # the reader library writes the test files
+  pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
+  offset = np.array([500_000.0, 4_000_000.0, 100.0])   # UTM-like map coordinates
+  paths = {}
+  for k, cloud in enumerate((pair.cloud1, pair.cloud2)):
+    pts = io.read_cloud(cloud).astype(np.float64) + offset
+    header = laspy.LasHeader(point_format=3, version='1.2')
+    header.offsets, header.scales = offset, [0.0001] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts.T
+    for ext in ('las', 'laz'):
+      las.write(tmp_path / f'c{k}.{ext}')
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(io.read_cloud(tmp_path / f'c{k}.las')))
+    o3d.io.write_point_cloud(str(tmp_path / f'c{k}.ply'), pcd)
+  results = {}
+  for ext in ('las', 'laz', 'ply'):
+    out = _run('experiments.register', f'--cloud1={tmp_path / f"c0.{ext}"}',
+               f'--cloud2={tmp_path / f"c1.{ext}"}', f'--json={tmp_path / f"{ext}.json"}',
+               '--fpfh_max_nn=200')
+    assert out.returncode == 0, out.stderr[-3000:]
+    results[ext] = json.loads((tmp_path / f'{ext}.json').read_text())
+  np.testing.assert_allclose(results['las']['T_12'], results['ply']['T_12'], atol=1e-6)
+  np.testing.assert_allclose(results['laz']['T_12'], results['ply']['T_12'], atol=1e-6)
+  # In map coordinates: T_12 = offset o (the true local transform) o -offset.
+  t = np.array(results['las']['T_12'])
+  shift = geometry.make_transform(np.eye(3), offset)
+  local = np.linalg.inv(shift) @ t @ shift
+  assert metrics.registration_errors(pair.transform, local)['success']
+  # What Open3D's RegistrationResult carries, beside T_12.
+  r = results['las']
+  assert 0 < r['fitness'] <= 1 and 0 < r['inlier_rmse'] < 1 and r['correspondence_set_size'] >= 3

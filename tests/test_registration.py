@@ -2,11 +2,13 @@
 
 import numpy as np
 import pytest
+from scipy import spatial
 
 from ssd_jax import geometry
 from ssd_jax.data import benchmarks, clean, groundtruth, io
-from ssd_jax.registration import features, metrics, pipeline, ransac, reference
+from ssd_jax.registration import features, keypoints, metrics, pipeline, ransac, reference
 from ssd_jax.synthetic import trajectory
+from tests.conftest import shared_path
 
 
 def test_reads_reference_groundtruths(tmp_path):
@@ -188,7 +190,7 @@ def test_pipeline_refuses_bad_clouds_with_one_line():
   for bad, message in ((with_nan, '1 points have NaN/Inf'), (np.zeros((0, 3)), 'empty'),
                        (pts[:, :2], r'shape \[N, 3\]'),
                        (pts + 5.4e6, 'float32 resolves only 0.5 m; subtract an offset'),
-                       (pts[:5] * 0.01, r'found \d in a cloud of 5 points')):
+                       (pts[:5] * 0.01, r'iss keypoints: found a cloud of 5 points, 64')):
     with pytest.raises(ValueError, match=message):
       pipeline.cloud_features(bad, fpfh_max_nn=50)
   for idx in (np.array([0, 500]), np.array([[1, 2]]), np.array([0.5])):
@@ -205,11 +207,98 @@ def test_open3d_reference_pipeline_registers_a_pair_and_refuses_a_flat_one(synth
   pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
   c1, c2 = (io.read_cloud(p) for p in (pair.cloud1, pair.cloud2))
   for settings in ('paper', 'tutorial'):
-    t, seconds = reference.open3d_register(c1, c2, settings=settings)
+    t, seconds, stats = reference.open3d_register(c1, c2, settings=settings)
     assert metrics.registration_errors(pair.transform, t)['success']
     assert set(seconds) == {'features', 'matching', 'ransac'} and min(seconds.values()) >= 0
+    assert 3 <= stats['inliers'] <= stats['matches'] and 0 < stats['fitness'] <= 1
   with pytest.raises(ValueError, match="settings must be one of"):
     reference.open3d_register(c1, c2, settings='pcl')
   flat = np.c_[np.random.default_rng(0).uniform(-10, 10, (2000, 2)), np.zeros(2000)]
   with pytest.raises(ValueError, match='too few ISS keypoints'):
     reference.open3d_register(flat, flat)
+
+
+def test_farthest_point_keypoints_are_spread_and_deterministic():
+  pts = np.random.default_rng(0).uniform(-20, 20, (3000, 3))
+  idx = keypoints.farthest_point_keypoints(pts, 200)
+  assert len(idx) == 200 and np.array_equal(idx, keypoints.farthest_point_keypoints(pts, 200))
+  # Every point lies within the covering radius of the chosen ones, which is far below
+  # what 200 random points leave uncovered.
+  cover = lambda chosen: spatial.cKDTree(pts[chosen]).query(pts)[0].max()
+  assert cover(idx) < 0.7 * cover(np.random.default_rng(1).choice(3000, 200, replace=False))
+  assert len(keypoints.farthest_point_keypoints(pts[:5], 200)) == 5
+
+
+def _sparse_rings(seed=0, rings=6):
+  """A 16-beam-like cloud: a few rings on the ground and a wall, ~40 points each."""
+  rng = np.random.default_rng(seed)
+  pts = []
+  for r in np.linspace(4, 30, rings):
+    a = rng.uniform(-np.pi, np.pi, 40)
+    pts.append(np.c_[r * np.cos(a), r * np.sin(a), np.full(40, -1.7)])
+  wall = np.c_[rng.uniform(-10, 10, 60), np.full(60, 12.0), rng.uniform(-1.7, 3, 60)]
+  return np.concatenate(pts + [wall])
+
+
+def test_iss_falls_back_on_a_sparse_cloud_and_says_so():
+  dense = io.read_cloud(shared_path('example', 'kitti_00_001554.bin'))
+  idx, note = keypoints.iss_with_fallbacks(dense)
+  assert note == '' and np.array_equal(idx, keypoints.iss(dense))
+  sparse = _sparse_rings()
+  assert len(keypoints.iss(sparse)) < keypoints.ENOUGH_KEYPOINTS
+  idx, note = keypoints.iss_with_fallbacks(sparse)
+  assert len(idx) >= 3 and f'ISS found {len(keypoints.iss(sparse))} keypoints in {len(sparse)}' \
+      in note and ('farthest-point' in note or 'radii' in note), note
+  # The pipeline carries the note, and a sparse pair registers instead of failing.
+  reg, f1, _ = pipeline.register(sparse, sparse, 'iss', 'fpfh')
+  assert f1.note == note and any(note in n for n in reg.notes)
+  # The evaluation protocol keeps the paper's ISS: too few keypoints fail the pair there.
+  idx, note = pipeline.compute_keypoints(sparse, 'iss', fallback=False)
+  assert note == '' and len(idx) == len(keypoints.iss(sparse))
+  auto, _ = pipeline.compute_keypoints(sparse, 'auto')
+  np.testing.assert_array_equal(auto, keypoints.farthest_point_keypoints(sparse, 1024))
+
+
+def test_upright_fit_is_exact_and_upright_ransac_finds_a_pose_at_few_inliers():
+  rng = np.random.default_rng(0)
+  src = rng.uniform(-30, 30, (400, 3))
+  t_true = geometry.make_transform(geometry.rotation_z(np.radians(130.0)), np.array([5.0, -3, 0.4]))
+  dst = src @ t_true[:3, :3].T + t_true[:3, 3]
+  np.testing.assert_allclose(ransac.upright_fit(src[:2], dst[:2]), t_true, atol=1e-9)
+  # 4 % correct correspondences, the scan tilted by 2 degrees: 3-point samples would need
+  # ~72,000 trials; 2-point ones find it, and the 6-DoF refit takes up the tilt.
+  tilt = np.radians(2.0)
+  rx = np.array([[1, 0, 0], [0, np.cos(tilt), -np.sin(tilt)], [0, np.sin(tilt), np.cos(tilt)]])
+  t_tilt = t_true.copy()
+  t_tilt[:3, :3] = t_true[:3, :3] @ rx
+  dst = src @ t_tilt[:3, :3].T + t_tilt[:3, 3] + rng.normal(0, 0.05, src.shape)
+  wrong = rng.random(400) > 0.04
+  dst[wrong] = rng.uniform(-30, 30, (wrong.sum(), 3))
+  samples = ransac.draw_upright_samples(np.random.default_rng(1), src, 10_001)
+  res = ransac.ransac_upright(dst, src, samples)
+  err = metrics.registration_errors(t_tilt, res.transform)
+  assert err['rte'] < 0.2 and err['rre_geodesic'] < 0.5 and res.inliers[~wrong].mean() > 0.9
+  reg = pipeline.estimate(pipeline.CloudFeatures(dst, np.eye(400), {}),
+                          pipeline.CloudFeatures(src, np.eye(400), {}), estimator='upright')
+  assert metrics.registration_errors(t_tilt, reg.transform)['success']
+  assert 0 < reg.fitness <= 1 and reg.correspondence_set_size == round(reg.fitness * 400)
+  assert 0 < reg.inlier_rmse < 1.0
+  with pytest.raises(ValueError, match='estimator must be one of'):
+    pipeline.estimate(pipeline.CloudFeatures(dst, np.eye(400), {}),
+                      pipeline.CloudFeatures(src, np.eye(400), {}), estimator='affine')
+
+
+def test_fpfh_keeps_its_4m_ball_on_a_dense_cloud_and_is_unchanged_on_a_voxelised_one():
+  voxelised = io.read_cloud(shared_path('example', 'kitti_00_001554.bin'))
+  kp = keypoints.iss(voxelised)[:50]
+  np.testing.assert_array_equal(features.fpfh(voxelised, kp),
+                                features.fpfh(voxelised, kp, search_voxel=0.0))
+  # A dense copy (every point 4 times, 5 cm apart): the neighbour cap would shrink the
+  # ball; on the grid its histograms match the voxelised cloud's far better.
+  rng = np.random.default_rng(0)
+  dense = np.concatenate([voxelised] + [voxelised + rng.normal(0, 0.05, voxelised.shape)
+                                        for _ in range(3)]).astype(np.float32)
+  ref = features.fpfh(voxelised, kp)
+  gridded, capped = features.fpfh(dense, kp), features.fpfh(dense, kp, search_voxel=0.0)
+  dist = lambda a: np.linalg.norm(a - ref, axis=1).mean()
+  assert dist(gridded) < 0.7 * dist(capped)

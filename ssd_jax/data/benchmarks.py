@@ -58,3 +58,39 @@ def read_registration_set(root: str | os.PathLike) -> list[RegistrationPair]:
                          'Oxford (test_models/ + groundtruths.txt) or KITTI (<seq>/groundtruths.txt)'
                          ' test set')
   return pairs
+
+
+# A cross-sensor set's pairs.tsv: which sensor saw each cloud and how far apart they stood.
+PAIR_INFO = 'pairs.tsv'
+PAIR_INFO_COLUMNS = ('idx1', 'idx2', 'sensor1', 'sensor2', 'distance_m', 'yaw_deg', 'source')
+
+
+def write_pair_info(folder: str | os.PathLike, rows: list[dict]) -> None:
+  """FOLDER/pairs.tsv with `PAIR_INFO_COLUMNS` (floats to 3 decimals)."""
+  fmt = lambda v: f'{v:.3f}' if isinstance(v, float) else str(v)
+  lines = ['\t'.join(PAIR_INFO_COLUMNS)] + [
+      '\t'.join(fmt(r[c]) for c in PAIR_INFO_COLUMNS) for r in rows]
+  (Path(folder) / PAIR_INFO).write_text('\n'.join(lines) + '\n')
+
+
+def read_pair_info(folder: str | os.PathLike) -> dict[tuple[int, int], dict]:
+  """(idx1, idx2) -> {sensor1, sensor2, distance_m, yaw_deg, source} of FOLDER/pairs.tsv,
+  or a CloudFileError naming what is wrong with it."""
+  path = Path(folder) / PAIR_INFO
+  if not path.is_file():
+    raise CloudFileError(f'{path}: missing (a cross-sensor set names each pair\'s sensors '
+                         'and distance there)')
+  lines = path.read_text().splitlines()
+  if not lines or tuple(lines[0].split('\t')) != PAIR_INFO_COLUMNS:
+    raise CloudFileError(f'{path}: the header must be {" ".join(PAIR_INFO_COLUMNS)}')
+  info = {}
+  for n, line in enumerate(lines[1:], 2):
+    parts = line.split('\t')
+    try:
+      row = dict(zip(PAIR_INFO_COLUMNS, parts, strict=True))
+      row['distance_m'], row['yaw_deg'] = float(row['distance_m']), float(row['yaw_deg'])
+      info[int(row['idx1']), int(row['idx2'])] = row
+    except ValueError:
+      raise CloudFileError(f'{path}, line {n}: expected {len(PAIR_INFO_COLUMNS)} tab-separated '
+                           f'fields with numeric indices and distance, got {line!r}') from None
+  return info

@@ -28,7 +28,7 @@ BIN_FORMATS = {
 # Auto-detection prefers the layout whose extra columns carry evidence (normals, then
 # an intensity) over plain xyz, which any byte count divisible by 12 also fits.
 _PREFERENCE = ('xyzn', 'xyzn64', 'xyzi', 'xyzi64', 'xyz', 'xyz64')
-CLOUD_SUFFIXES = ('.bin', '.npy', '.ply', '.pcd')
+CLOUD_SUFFIXES = ('.bin', '.npy', '.ply', '.pcd', '.las', '.laz')
 # Metres. Beyond it a value is read garbage, not a coordinate (UTM northings are ~1e7).
 MAX_COORDINATE = 1e8
 _DETECT_ROWS = 8192
@@ -209,7 +209,25 @@ def read_cloud(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
     if pts.size == 0:
       raise CloudFileError(f'{path}: Open3D read no points (empty or unreadable {suffix} file)')
     return pts
+  if suffix in ('.las', '.laz'):
+    return _read_las(path)
   raise CloudFileError(f'{path}: unsupported file type {suffix!r}; supported: {CLOUD_SUFFIXES}')
+
+
+def _read_las(path: Path) -> np.ndarray:
+  """xyz [N, 3] float64 of an ASPRS LAS / LAZ file (laspy; LAZ through lazrs), scaled and
+  offset as the header says: map coordinates keep their precision."""
+  import laspy  # pylint: disable=g-import-not-at-top  (0.1 s; only for LAS input)
+  if path.stat().st_size == 0:
+    raise CloudFileError(f'{path}: file is empty')
+  try:
+    las = laspy.read(path)
+  except Exception as e:  # pylint: disable=broad-except  (laspy raises many kinds)
+    raise CloudFileError(f'{path}: not a readable LAS/LAZ file ({type(e).__name__}: {e})') from None
+  pts = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], 1).astype(np.float64)
+  if pts.size == 0:
+    raise CloudFileError(f'{path}: the LAS file holds no points')
+  return pts
 
 
 @dataclasses.dataclass(frozen=True)

@@ -9,6 +9,9 @@ density). A re-scan differs the way two scans of a moving sensor differ:
     drawn over the whole circle;
   * it sees only what is visible from there (Open3D's hidden point removal, the
     spherical-flip operator of Katz et al. 2007) within its range;
+  * optionally, the virtual sensor is another unit (`sensor`, a name of
+    `ssd_jax.sensors.SENSORS`): its view keeps only what that unit's beams would return
+    (`sensors.resample`), e.g. the rings of a 16-beam unit or a 120-degree sector;
   * both views are voxel-grid downsampled on grids with their own random offsets,
     so no point is shared, and get their own sensor noise.
 
@@ -24,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ssd_jax import geometry
-from ssd_jax.data import clean, groundtruth, io
+from ssd_jax import geometry, sensors
+from ssd_jax.data import benchmarks, clean, groundtruth, io, preprocess
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,6 +45,11 @@ class RescanConfig:
   # no sensor at their origin and no sensor-centred occlusion, so the second view keeps
   # everything within max_range of its displaced centre, as a second submap of the place.
   occlusion: bool = True
+  sensor: str = ''            # the virtual unit (ssd_jax.sensors); '' keeps every visible point
+  # True: the standpoint lies in the direction of a random point of the scan, not of a
+  # uniform angle, so a scan that covers a sector only (KITTI's front-camera crops) is
+  # re-scanned from over its own data when the standpoint is tens of metres away.
+  toward_points: bool = False
 
 
 def _voxel_grid(rng: np.random.Generator, points: np.ndarray, size: float) -> np.ndarray:
@@ -78,12 +86,19 @@ def rescan_pair(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
   the virtual sensor is turned by `yaw_deg` about z."""
   for _ in range(20):
     r = rng.uniform(cfg.min_shift, cfg.max_shift)
-    a = rng.uniform(-np.pi, np.pi)
+    if cfg.toward_points:
+      p = points[rng.integers(len(points))]
+      a = np.arctan2(p[1], p[0])
+    else:
+      a = rng.uniform(-np.pi, np.pi)
     shift = np.array([r * np.cos(a), r * np.sin(a), 0.0])
     seen = points[visible_from(points, shift, cfg.hpr_radius_factor)] if cfg.occlusion else points
     c, s = np.cos(np.deg2rad(yaw_deg)), np.sin(np.deg2rad(yaw_deg))
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    cloud2 = _view(rng, (seen - shift) @ rot, cfg)   # row form of R^T (p - c)
+    local = (seen - shift) @ rot   # row form of R^T (p - c)
+    if cfg.sensor:
+      local = local[sensors.resample(local, sensors.get(cfg.sensor))]
+    cloud2 = _view(rng, local, cfg)
     if len(cloud2) >= cfg.min_points:
       break
   else:
@@ -95,11 +110,18 @@ def rescan_pair(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
   return cloud1, cloud2, transform
 
 
+def _write_view(path: Path, cloud: np.ndarray) -> None:
+  """With normals, as 3DFeat-Net's KITTI processing: N x 6 rows, whose layout the reader
+  tells apart, where N x 3 float32 rows of an even N may also read as float64 ones."""
+  io.write_bin(path, cloud, preprocess.estimate_normals(cloud))
+
+
 def make_rescan_set(sources: list, out: str | os.PathLike, seed: int = 0,
                     pairs_per_cloud: int = 8, cfg: RescanConfig = RescanConfig(),
                     progress=None) -> list[dict]:
   """Write a registration set of re-scan pairs (the sequence-folder layout that
-  `benchmarks.read_registration_set` reads: OUT/groundtruths.txt, OUT/%06d.bin, and
+  `benchmarks.read_registration_set` reads: OUT/groundtruths.txt, OUT/%06d.bin (xyz +
+  normals), and
   OUT/sources.tsv naming each pair's source scan and yaw).
 
   sources: cloud files (any format `io.read_cloud` reads). Each gives
@@ -118,8 +140,8 @@ def make_rescan_set(sources: list, out: str | os.PathLike, seed: int = 0,
       rng = np.random.default_rng((seed, s, j))
       yaw = -180.0 + width * (j + rng.uniform())
       cloud1, cloud2, transform = rescan_pair(rng, points, yaw, cfg)
-      io.write_bin(out / f'{2 * n:06d}.bin', cloud1)
-      io.write_bin(out / f'{2 * n + 1:06d}.bin', cloud2)
+      _write_view(out / f'{2 * n:06d}.bin', cloud1)
+      _write_view(out / f'{2 * n + 1:06d}.bin', cloud2)
       gts.append(groundtruth.GroundTruthPair(2 * n, 2 * n + 1, transform))
       rows.append({'idx1': 2 * n, 'idx2': 2 * n + 1, 'source': Path(source).name,
                    'yaw_deg': float(geometry.yaw_deg(transform)), 'points': [len(cloud1), len(cloud2)]})
@@ -131,4 +153,51 @@ def make_rescan_set(sources: list, out: str | os.PathLike, seed: int = 0,
       f'{r["idx1"]}\t{r["idx2"]}\t{r["source"]}\t{r["yaw_deg"]:.3f}\t{r["points"][0]}\t'
       f'{r["points"][1]}' for r in rows]
   (out / 'sources.tsv').write_text('\n'.join(lines) + '\n')
+  return rows
+
+
+def make_cross_sensor_set(sources: list, out: str | os.PathLike, sensor_names, distance_bins,
+                          pairs_per_cell: int = 1, seed: int = 0,
+                          cfg: RescanConfig = RescanConfig(min_points=500, toward_points=True),
+                          progress=None) -> list[dict]:
+  """A cross-sensor registration set from real scans: for every source, unit of
+  `sensor_names` and (low, high) metres of `distance_bins`, `pairs_per_cell` pairs of the
+  scan (cloud 1) and its re-scan by that unit from a standpoint low-high metres away at a
+  uniform yaw (cloud 2). Writes OUT/groundtruths.txt, OUT/%06d.bin (xyz + normals) and
+  OUT/pairs.tsv
+  (`benchmarks.write_pair_info`); pair n draws from `default_rng((seed, n))`.
+  -> the pairs.tsv rows."""
+  out = Path(out)
+  out.mkdir(parents=True, exist_ok=True)
+  rows, gts, n = [], [], 0
+  for source in sources:
+    points = clean.clean_cloud(io.read_cloud(source), str(source))
+    name = Path(source).parent.name + '/' + Path(source).name
+    for sensor in sensor_names:
+      for lo, hi in distance_bins:
+        for _ in range(pairs_per_cell):
+          rng = np.random.default_rng((seed, n))
+          pair_cfg = dataclasses.replace(cfg, sensor=sensor, min_shift=lo, max_shift=hi)
+          # A unit with a limited field of view, turned away from a scan that covers a
+          # sector only, sees nothing: such a yaw is drawn again.
+          for attempt in range(10):
+            try:
+              cloud1, cloud2, transform = rescan_pair(rng, points, rng.uniform(-180, 180),
+                                                      pair_cfg)
+              break
+            except ValueError:
+              if attempt == 9:
+                raise ValueError(f'{source}: no {sensor} standpoint {lo}-{hi} m away sees '
+                                 f'{cfg.min_points} points of it') from None
+          for k, cloud in enumerate((cloud1, cloud2)):
+            _write_view(out / f'{2 * n + k:06d}.bin', cloud)
+          gts.append(groundtruth.GroundTruthPair(2 * n, 2 * n + 1, transform))
+          rows.append({'idx1': 2 * n, 'idx2': 2 * n + 1, 'sensor1': 'source', 'sensor2': sensor,
+                       'distance_m': float(np.linalg.norm(transform[:2, 3])),
+                       'yaw_deg': float(geometry.yaw_deg(transform)), 'source': name})
+          n += 1
+          if progress is not None:
+            progress(1)
+  groundtruth.write_groundtruths(out / 'groundtruths.txt', gts)
+  benchmarks.write_pair_info(out, rows)
   return rows

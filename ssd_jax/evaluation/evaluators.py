@@ -8,6 +8,7 @@ section `{type: <evaluator>, <its settings>}`:
     repeatability        keypoints found again within a radius after the true alignment
     descriptor_matching  Table III: FPR at 95 % recall on cluster pairs
     figures              Fig. 3 (keypoints) and Figs. 5-6 (registration examples)
+    cross_sensor         registration as a sensor x distance matrix, with Open3D's pipeline
 
 Settings shared by all (checkpoints, keypoint x descriptor rows, RANSAC, seeds) sit at
 the top of the config (configs/evaluation.py). Data paths are tried in order, relative
@@ -35,8 +36,8 @@ import ml_collections
 
 from ssd_jax import distributed, viz
 from ssd_jax.data import benchmarks, clusters, io
-from ssd_jax.evaluation import (descriptor_matching, feature_store, fingerprint, precision,
-                                registration, repeatability, report)
+from ssd_jax.evaluation import (cross_sensor, descriptor_matching, feature_store, fingerprint,
+                                precision, registration, repeatability, report)
 from ssd_jax.registration import pipeline
 
 REPRODUCIBILITY = (
@@ -103,6 +104,27 @@ def _registration(name, ev, ctx: Context) -> Section:
         max_trials=cfg.max_trials, log=log, desc=name)
   return Section(ev.title, report.registration_outputs(
       results, rows, ctx.missing, str(ctx.workdir), ev.paper, description, name))
+
+
+def _cross_sensor(name, ev, ctx: Context) -> Section:
+  read = lambda path: (benchmarks.read_registration_set(path), benchmarks.read_pair_info(path))
+  path, (pairs, info) = ctx.find(ev.dataset, read, 'cross-sensor set')
+  pairs = pairs[:ctx.config.max_pairs] if ctx.config.max_pairs else pairs
+  cfg, rows = ctx.config, list(ev.rows)
+  store_rows = [r for r in rows if r != cross_sensor.REFERENCE_ROW]
+  with open(ctx.workdir / f'{name}_pairs.jsonl', 'w') as log:
+    results = registration.register_pairs(
+        pairs, feature_store.runnable_rows(store_rows, ctx.missing), ctx.store, seed=cfg.seed,
+        inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
+        max_trials=cfg.max_trials, log=log, desc=name)
+    if cross_sensor.REFERENCE_ROW in rows:
+      results[cross_sensor.REFERENCE_ROW] = cross_sensor.register_reference(
+          pairs, ctx.store, seed=cfg.seed, log=log, desc=f'{name} open3d')
+  units = list(dict.fromkeys(info[p.idx1, p.idx2]['sensor2'] for p in pairs))
+  cells = cross_sensor.matrix(results, info, ev.distance_bins)
+  return Section(ev.title, cross_sensor.outputs(
+      cells, rows, ctx.missing, units, ev.distance_bins, str(ctx.workdir),
+      f'{path} ({len(pairs)} pairs)', name))
 
 
 def _precision(name, ev, ctx: Context) -> Section:
@@ -212,6 +234,8 @@ EVALUATORS = {
                                      lambda config, ev: [f'iss+{d}' for d in ev.descriptors]),
     'figures': Evaluator(_figures, lambda config, ev: list(ev.registration_rows) + [
         f'{s}+fpfh' for s in ev.keypoint_sources]),
+    'cross_sensor': Evaluator(_cross_sensor, lambda config, ev: [
+        r for r in ev.rows if r != cross_sensor.REFERENCE_ROW]),
 }
 TYPES = tuple(EVALUATORS)
 

@@ -22,24 +22,35 @@ from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
 from ssd_jax.registration import features as features_lib, pipeline
 
-BUILTIN_KEYPOINTS = ('iss', 'random')
+BUILTIN_KEYPOINTS = ('iss', 'random', 'auto')
 BUILTIN_DESCRIPTORS = ('fpfh',)
-NAMES = {'iss': 'ISS', 'random': 'random', 'fpfh': 'FPFH', 'ours': 'Ours',
+NAMES = {'iss': 'ISS', 'random': 'random', 'auto': 'farthest-point', 'fpfh': 'FPFH',
+         'ours': 'Ours',
          'feat3dnet': '3DFeat-Net', 'ours_detector': 'Ours (self-sup. detector)',
          'ours_run': 'Ours (this run)'}
 
 
 def split_row(row: str) -> tuple[str, str]:
-  """'iss+fpfh' -> ('iss', 'fpfh'), or a clear error."""
+  """'iss+fpfh' (or 'iss+fpfh+upright') -> ('iss', 'fpfh'), or a clear error."""
   parts = row.split('+')
+  if len(parts) == 3 and parts[2] in pipeline.ESTIMATORS:
+    parts = parts[:2]
   if len(parts) != 2 or not all(parts):
-    raise ValueError(f'row {row!r} must be "keypoints+descriptor", e.g. iss+fpfh')
+    raise ValueError(f'row {row!r} must be "keypoints+descriptor[+estimator]", e.g. iss+fpfh '
+                     f'or auto+ours+upright (estimators: {", ".join(pipeline.ESTIMATORS)})')
   return parts[0], parts[1]
+
+
+def row_estimator(row: str) -> str:
+  """The RANSAC model of a row: its third part, else 'rigid' (the paper's)."""
+  parts = row.split('+')
+  return parts[2] if len(parts) == 3 else 'rigid'
 
 
 def row_label(row: str) -> str:
   kp, desc = split_row(row)
-  return f'{NAMES.get(kp, kp)} kpt + {NAMES.get(desc, desc)} desc'
+  suffix = ', upright RANSAC' if row_estimator(row) == 'upright' else ''
+  return f'{NAMES.get(kp, kp)} kpt + {NAMES.get(desc, desc)} desc{suffix}'
 
 
 def model_names(rows: Sequence[str]) -> list[str]:
@@ -106,9 +117,10 @@ class FeatureStore:
       points = self.cloud(path)
       t0 = time.perf_counter()
       if source in BUILTIN_KEYPOINTS:
-        idx = pipeline.compute_keypoints(points, source, seed=self.seed)
+        # The protocol: a detector that finds too few keypoints fails the pair.
+        idx, _ = pipeline.compute_keypoints(points, source, seed=self.seed, fallback=False)
       else:
-        idx = pipeline.compute_keypoints(points, 'learned', self._model(source))
+        idx, _ = pipeline.compute_keypoints(points, 'learned', self._model(source))
       self.seconds[f'keypoints:{source}'] += time.perf_counter() - t0
       self._keypoints[key] = idx
     return self._keypoints[key]

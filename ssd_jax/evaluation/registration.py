@@ -10,6 +10,7 @@ import jax
 from tqdm import auto as tqdm
 
 from ssd_jax import distributed
+from ssd_jax.data import clean, io
 from ssd_jax.evaluation import feature_store, paper, tables
 from ssd_jax.registration import metrics, pipeline
 
@@ -22,7 +23,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
 
   pairs: `benchmarks.RegistrationPair`s. Pair n's RANSAC samples are seeded with
   seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
-  result holds RTE, RRE (Euler sum, geodesic), success, trials and inliers (a pair
+  result holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair
   with fewer than 3 keypoints in a cloud fails, with its `error`); with
   `log`, one JSON line per pair and row is written to it. Over several processes each
   registers its share of the pairs (`distributed.map_items`) and every process returns
@@ -33,17 +34,21 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   def register(n: int, pair) -> list[dict]:
     out = []
     for row in rows:
-      f1, f2 = store.features(pair.cloud1, row), store.features(pair.cloud2, row)
       res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
       try:
+        f1, f2 = store.features(pair.cloud1, row), store.features(pair.cloud2, row)
         reg = pipeline.estimate(f1, f2, seed=seed * 1_000_003 + n,
                                 inlier_threshold=inlier_threshold, confidence=confidence,
-                                max_trials=max_trials)
-      except ValueError as e:   # too few keypoints: a failed pair, not a failed benchmark
-        res.update(trials=0, inliers=0, rte=float('inf'), rre=float('inf'),
+                                max_trials=max_trials,
+                                estimator=feature_store.row_estimator(row))
+      except (io.CloudFileError, clean.CloudDataError):
+        raise   # a damaged test file stops the benchmark, named
+      except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,
+        # flat): a failed pair, not a failed benchmark
+        res.update(trials=0, inliers=0, matches=0, rte=float('inf'), rre=float('inf'),
                    rre_geodesic=float('inf'), success=False, error=str(e))
       else:
-        res.update(trials=reg.trials, inliers=int(reg.inliers.sum()),
+        res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
                    **metrics.registration_errors(pair.transform, reg.transform))
       out.append(res)
       if log is not None and one_process:   # as it goes: a stopped run keeps its pairs

@@ -31,3 +31,75 @@ def iss(points: np.ndarray, **overrides) -> np.ndarray:
 def random_keypoints(rng: np.random.Generator, num_points: int, k: int) -> np.ndarray:
   """k distinct random indices (all when fewer), sorted."""
   return np.sort(rng.choice(num_points, min(k, num_points), replace=False))
+
+
+def farthest_point_keypoints(points: np.ndarray, k: int) -> np.ndarray:
+  """k points spread evenly over the cloud: farthest-point sampling of points [N, 3]
+  from the point nearest the centroid (deterministic) -> sorted indices [min(k, N)]."""
+  pts = np.asarray(points, np.float64)
+  k = min(k, len(pts))
+  if k == 0:
+    return np.zeros(0, np.int64)
+  chosen = np.empty(k, np.int64)
+  chosen[0] = int(np.argmin(np.sum((pts - pts.mean(0)) ** 2, axis=1)))
+  dist = np.sum((pts - pts[chosen[0]]) ** 2, axis=1)
+  for i in range(1, k):
+    chosen[i] = int(np.argmax(dist))
+    dist = np.minimum(dist, np.sum((pts - pts[chosen[i]]) ** 2, axis=1))
+  return np.unique(chosen)
+
+
+# `iss_with_fallbacks`: fewer ISS keypoints than this is too few to register a pair
+# reliably (RANSAC needs tens of correct matches among them), so the next detector is tried.
+ENOUGH_KEYPOINTS = 64
+ISS_SCALES = (2.0, 4.0)        # ISS radii, times the paper's, tried in turn on sparse clouds
+FARTHEST_POINT_KEYPOINTS = 1024
+MIN_RELIEF = 0.05   # metres: a cloud flatter than this has no 3-D structure to register by
+
+
+def check_registrable(points: np.ndarray, what: str = 'keypoints') -> None:
+  """Refuse, with a one-line ValueError, a cloud [N, 3] (metres) that no keypoints can
+  register: fewer than `ENOUGH_KEYPOINTS` points, or flat (the smallest principal
+  standard deviation under `MIN_RELIEF`: a plane slides over itself)."""
+  pts = np.asarray(points, np.float64)
+  if len(pts) < ENOUGH_KEYPOINTS:
+    raise ValueError(f'{what}: found a cloud of {len(pts)} points, {ENOUGH_KEYPOINTS} are '
+                     'needed (too sparse?)')
+  relief = float(np.sqrt(max(np.linalg.eigvalsh(np.cov(pts.T))[0], 0.0)))
+  if relief < MIN_RELIEF:
+    raise ValueError(f'{what}: found no relief: all {len(pts)} points lie within '
+                     f'{relief:.3f} m (1 sigma) of a plane, a degenerate scene')
+
+
+def point_spacing(points: np.ndarray, sample: int = 2000) -> float:
+  """Median distance (metres) from a point to its nearest neighbour, over up to `sample`
+  evenly strided points of points [N, 3]."""
+  pts = np.asarray(points, np.float64)
+  if len(pts) < 2:
+    return float('nan')
+  probe = pts[::max(1, len(pts) // sample)]
+  dist, _ = spatial.cKDTree(pts).query(probe, k=2)
+  return float(np.median(dist[:, 1]))
+
+
+
+
+def iss_with_fallbacks(points: np.ndarray) -> tuple[np.ndarray, str]:
+  """ISS that does not give up on a sparse cloud: the paper's radii; where that finds
+  fewer than `ENOUGH_KEYPOINTS` (a 16-beam unit, a small crop), ISS with its radii scaled
+  up (`ISS_SCALES`, so that each neighbourhood holds as many points as in a 64-beam scan);
+  then `FARTHEST_POINT_KEYPOINTS` farthest-point keypoints, which need no structure; a
+  cloud that `check_registrable` refuses is a ValueError.
+  points [N, 3] metres -> (indices [K], '' or a one-line note of the fallback used)."""
+  idx = iss(points)
+  if len(idx) >= ENOUGH_KEYPOINTS:
+    return idx, ''
+  check_registrable(points, 'iss keypoints')   # no fallback registers these either
+  found = (f'ISS found {len(idx)} keypoints in {len(points)} points '
+           f'(point spacing {point_spacing(points):.2f} m)')
+  for scale in ISS_SCALES:
+    scaled = iss(points, **{k: v * scale for k, v in ISS_PARAMS.items() if k.endswith('radius')})
+    if len(scaled) >= ENOUGH_KEYPOINTS:
+      return scaled, f'{found}; used ISS at {scale:g}x its radii: {len(scaled)} keypoints'
+  fps = farthest_point_keypoints(points, FARTHEST_POINT_KEYPOINTS)
+  return fps, f'{found}; used {len(fps)} farthest-point keypoints'

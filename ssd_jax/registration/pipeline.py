@@ -18,8 +18,12 @@ from ssd_jax.data import clean
 from ssd_jax.data.clean import check_cloud
 from ssd_jax.registration import features, keypoints as keypoints_lib, matching, ransac
 
-KEYPOINTS = ('iss', 'learned', 'random')
+KEYPOINTS = ('auto', 'iss', 'learned', 'random')
 DESCRIPTORS = ('fpfh', 'learned')
+# RANSAC's motion model: 'rigid', 3-point samples of any rotation (the paper's); 'upright',
+# 2-point samples of a turn about z and a translation, for scans whose z axis is up,
+# refit in 6 degrees of freedom (ransac.ransac_upright).
+ESTIMATORS = ('rigid', 'upright')
 
 
 @dataclasses.dataclass
@@ -28,6 +32,7 @@ class CloudFeatures:
   xyz: np.ndarray          # [K, 3] metres
   descriptors: np.ndarray  # [K, D]
   seconds: dict
+  note: str = ''           # the keypoint fallback used, if any (one line)
 
 
 @dataclasses.dataclass
@@ -38,21 +43,42 @@ class Registration:
   trials: int
   seconds: dict
   icp_fitness: float | None = None   # share of cloud-2 points with an ICP partner
+  notes: list = dataclasses.field(default_factory=list)   # fallbacks used, one line each
+  # As Open3D's RegistrationResult, over the K1 matches under the final transform: the
+  # share within the inlier threshold, their RMSE (metres) and their count.
+  fitness: float = 0.0
+  inlier_rmse: float = 0.0
+  correspondence_set_size: int = 0
 
 
 def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0,
-                      num_random: int = 1024) -> np.ndarray:
-  """Keypoint indices into points [N, 3]: ISS (docs/method.md §4), learned attention +
-  NMS (needs a detector-trained `inference.Model`), or `num_random` random points."""
+                      num_random: int = keypoints_lib.FARTHEST_POINT_KEYPOINTS,
+                      fallback: bool = True) -> tuple[np.ndarray, str]:
+  """Keypoint indices into points [N, 3] and a note ('' or the fallback used):
+
+    auto     `num_random` farthest-point keypoints: evenly spread, so found again in a
+             scan from another sensor or standpoint (docs/cross_sensor.md), the way the
+             network's training samples its cluster centres; the register default
+    iss      ISS with the paper's radii (docs/method.md §4); with `fallback`, a sparse
+             cloud falls back to wider radii, then farthest-point keypoints
+             (`keypoints.iss_with_fallbacks`); without, the evaluation protocol
+    learned  attention + NMS (needs a detector-trained `inference.Model`)
+    random   `num_random` random points
+  """
   points = check_cloud(points)
+  if method == 'auto':
+    keypoints_lib.check_registrable(points, 'auto keypoints')
+    return keypoints_lib.farthest_point_keypoints(points, num_random), ''
   if method == 'iss':
-    return keypoints_lib.iss(points)
+    if fallback:
+      return keypoints_lib.iss_with_fallbacks(points)
+    return keypoints_lib.iss(points), ''
   if method == 'random':
-    return keypoints_lib.random_keypoints(np.random.default_rng(seed), len(points), num_random)
+    return keypoints_lib.random_keypoints(np.random.default_rng(seed), len(points), num_random), ''
   if method == 'learned':
     if model is None:
       raise ValueError('learned keypoints need a model (--checkpoint)')
-    return inference.detect(model, points)[0]
+    return inference.detect(model, points)[0], ''
   raise ValueError(f'keypoints must be one of {KEYPOINTS}, got {method!r}')
 
 
@@ -84,19 +110,23 @@ def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str =
   detector finds fewer than 3 keypoints."""
   points = check_cloud(points)
   t0 = time.perf_counter()
-  idx = compute_keypoints(points, keypoints, model, seed)
+  idx, note = compute_keypoints(points, keypoints, model, seed)
   if len(idx) < 3:
     raise ValueError(f'{keypoints} keypoints: found {len(idx)} in a cloud of {len(points)} '
                      'points, 3 are needed (too sparse, or planar / collinear?)')
   t1 = time.perf_counter()
   desc = compute_descriptors(points, idx, descriptor, model, fpfh_max_nn=fpfh_max_nn)
   t2 = time.perf_counter()
-  return CloudFeatures(points[idx], desc, {'keypoints': t1 - t0, 'descriptors': t2 - t1})
+  return CloudFeatures(points[idx], desc, {'keypoints': t1 - t0, 'descriptors': t2 - t1}, note)
 
 
 def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_threshold: float = 1.0,
-             confidence: float = 0.99, max_trials: int = 10_000) -> Registration:
-  """Nearest-neighbour matches of cloud 1's keypoints among cloud 2's, then RANSAC."""
+             confidence: float = 0.99, max_trials: int = 10_000,
+             estimator: str = 'rigid') -> Registration:
+  """Nearest-neighbour matches of cloud 1's keypoints among cloud 2's, then RANSAC with
+  the motion model `estimator` (`ESTIMATORS`)."""
+  if estimator not in ESTIMATORS:
+    raise ValueError(f'estimator must be one of {ESTIMATORS}, got {estimator!r}')
   if len(f1.xyz) < 3 or len(f2.xyz) < 3:
     raise ValueError(f'too few keypoints to register ({len(f1.xyz)} and {len(f2.xyz)}; at '
                      'least 3 each): is the cloud degenerate (empty, planar or collinear)?')
@@ -104,11 +134,21 @@ def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_thresho
   nn = matching.nearest_neighbour_matches(f1.descriptors, f2.descriptors)
   xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[nn].astype(np.float64)
   t1 = time.perf_counter()
-  samples = ransac.draw_minimal_samples(np.random.default_rng(seed), xyz2, max_trials + 1)
-  res = ransac.ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials)
+  rng = np.random.default_rng(seed)
+  if estimator == 'upright':
+    samples = ransac.draw_upright_samples(rng, xyz2, max_trials + 1)
+    res = ransac.ransac_upright(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials)
+  else:
+    samples = ransac.draw_minimal_samples(rng, xyz2, max_trials + 1)
+    res = ransac.ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials)
   t2 = time.perf_counter()
+  residual = np.linalg.norm(xyz2 @ res.transform[:3, :3].T + res.transform[:3, 3] - xyz1, axis=1)
+  close = residual < inlier_threshold
+  rmse = float(np.sqrt(np.mean(residual[close] ** 2))) if close.any() else 0.0
   return Registration(res.transform, np.stack([np.arange(len(nn)), nn], 1), res.inliers,
-                      res.trials, {'matching': t1 - t0, 'ransac': t2 - t1})
+                      res.trials, {'matching': t1 - t0, 'ransac': t2 - t1},
+                      fitness=float(close.mean()), inlier_rmse=rmse,
+                      correspondence_set_size=int(close.sum()))
 
 
 def local_origin(*clouds: np.ndarray) -> np.ndarray:
@@ -139,7 +179,7 @@ def features_anywhere(points: np.ndarray, keypoints: str = 'iss', descriptor: st
 def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
              descriptor: str = 'fpfh', model=None, seed: int = 0,
              fpfh_max_nn: int = features.FPFH_MAX_NN, icp: bool = False,
-             ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
+             estimator: str = 'rigid') -> tuple[Registration, CloudFeatures, CloudFeatures]:
   """The whole pipeline on two clouds, in the caller's coordinates.
 
   points1 (target) [N1, 3] and points2 (source) [N2, 3] metres, any float type. Clouds
@@ -155,7 +195,19 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
   offset = local_origin(clouds[0], clouds[1])
   local = [check_cloud(c - offset, name) for c, name in zip(clouds, ('cloud 1', 'cloud 2'))]
   f1, f2 = (cloud_features(c, keypoints, descriptor, model, seed, fpfh_max_nn) for c in local)
-  reg = estimate(f1, f2, seed)
+  notes = [f'{name}: {f.note}' for name, f in (('cloud 1', f1), ('cloud 2', f2)) if f.note]
+  try:
+    reg = estimate(f1, f2, seed, estimator=estimator)
+  except ValueError as e:
+    if keypoints != 'iss':
+      raise
+    # Degenerate samples (every match on one line of points) or too few keypoints: keypoints
+    # spread over the whole of both clouds give RANSAC something to sample.
+    f1, f2 = (cloud_features(c, 'auto', descriptor, model, seed, fpfh_max_nn) for c in local)
+    notes.append(f'{e}; registered again with {len(f1.xyz)} / {len(f2.xyz)} farthest-point '
+                 'keypoints')
+    reg = estimate(f1, f2, seed, estimator=estimator)
+  reg.notes = notes
   transform = reg.transform
   if icp:
     t0 = time.perf_counter()

@@ -62,23 +62,32 @@ def _degenerate(p: np.ndarray, eps: float = 1e-6) -> np.ndarray:
                         axis=-1) < eps
 
 
+def _draw_samples(rng: np.random.Generator, n: int, size: int, num_trials: int, accept,
+                  degenerate: str) -> np.ndarray:
+  """[num_trials, size] indices into n correspondences, rows drawn uniformly and kept when
+  `accept(rows [R, size]) -> [R] bool` says so (redrawn otherwise, as Kovesi's
+  `maxDataTrials` loop does); ValueError(`degenerate`) when almost none pass."""
+  out = np.empty((0, size), np.int64)
+  for _ in range(100):
+    cand = rng.integers(0, n, (max(num_trials - len(out), 1) * 2 + 16, size))
+    out = np.concatenate([out, cand[accept(cand)]])[:num_trials]
+    if len(out) == num_trials:
+      return out
+  raise ValueError(degenerate)
+
+
 def draw_minimal_samples(rng: np.random.Generator, xyz2: np.ndarray, num_trials: int) -> np.ndarray:
   """The random minimal samples of `num_trials` trials: [T, 3] indices, three distinct
-  correspondences per trial whose cloud-2 points are not collinear (redrawn when they
-  are, as Kovesi's `maxDataTrials` loop does)."""
+  correspondences per trial whose cloud-2 points are not collinear."""
   n = len(xyz2)
   if n < 3:
     raise ValueError(f'RANSAC needs at least 3 correspondences, got {n}')
-  out = np.empty((0, 3), np.int64)
-  for _ in range(100):
-    cand = rng.integers(0, n, (max(num_trials - len(out), 1) * 2 + 16, 3))
-    ok = ((cand[:, 0] != cand[:, 1]) & (cand[:, 0] != cand[:, 2]) & (cand[:, 1] != cand[:, 2]) &
-          ~_degenerate(xyz2[cand]))
-    out = np.concatenate([out, cand[ok]])[:num_trials]
-    if len(out) == num_trials:
-      return out
-  raise ValueError('RANSAC: every minimal sample is degenerate (all cloud-2 keypoints '
-                   'collinear or coincident)')
+  return _draw_samples(
+      rng, n, 3, num_trials,
+      lambda c: ((c[:, 0] != c[:, 1]) & (c[:, 0] != c[:, 2]) & (c[:, 1] != c[:, 2])
+                 & ~_degenerate(xyz2[c])),
+      'RANSAC: every minimal sample is degenerate (all cloud-2 keypoints collinear or '
+      'coincident)')
 
 
 def _check_samples(samples: np.ndarray, max_trials: int) -> None:
@@ -236,3 +245,92 @@ def _replay(score, samples, n, confidence, max_trials, min_trials, batch_size
     stop = stop or not needed > trials
     size = min(2 * size, batch_size)
   return trials, best_trial, best_score
+
+
+# Upright RANSAC: scans whose z axis is up (a vehicle's LiDAR, a levelled tripod) differ by
+# a turn about z and a translation, 4 degrees of freedom that 2 correspondences fix. A
+# 2-point sample is all-inlier with probability w^2 instead of w^3: at 2 % correct matches
+# 10,000 trials find the pose with 98 % chance, where 3-point samples need 575,000.
+UPRIGHT_MIN_SEPARATION = 0.5   # metres: a 2-point sample closer than this fixes no yaw
+
+
+def upright_fit(src: np.ndarray, dst: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
+  """Least-squares turn about z and translation T [..., 4, 4] with T src ≈ dst;
+  src, dst [..., n, 3] (n >= 2), optional weights [..., n] >= 0."""
+  if weight is None:
+    weight = np.ones(src.shape[:-1])
+  w = weight / np.maximum(weight.sum(-1, keepdims=True), 1e-12)
+  mu_s = np.einsum('...n,...nk->...k', w, src)
+  mu_d = np.einsum('...n,...nk->...k', w, dst)
+  s, d = src - mu_s[..., None, :], dst - mu_d[..., None, :]
+  # The yaw maximising sum w <R s, d> in the xy-plane (2-D Kabsch).
+  sxx = np.einsum('...n,...n->...', w, s[..., 0] * d[..., 0] + s[..., 1] * d[..., 1])
+  sxy = np.einsum('...n,...n->...', w, s[..., 0] * d[..., 1] - s[..., 1] * d[..., 0])
+  yaw = np.arctan2(sxy, sxx)
+  c, si = np.cos(yaw), np.sin(yaw)
+  t = np.zeros(src.shape[:-2] + (4, 4))
+  t[..., 0, 0], t[..., 0, 1], t[..., 1, 0], t[..., 1, 1] = c, -si, si, c
+  t[..., 2, 2] = t[..., 3, 3] = 1.0
+  t[..., :3, 3] = mu_d - np.einsum('...ij,...j->...i', t[..., :3, :3], mu_s)
+  return t
+
+
+def draw_upright_samples(rng: np.random.Generator, xyz2: np.ndarray, num_trials: int) -> np.ndarray:
+  """[T, 2] indices: two correspondences per trial whose cloud-2 points lie at least
+  UPRIGHT_MIN_SEPARATION apart horizontally."""
+  n = len(xyz2)
+  if n < 2:
+    raise ValueError(f'upright RANSAC needs at least 2 correspondences, got {n}')
+  return _draw_samples(
+      rng, n, 2, num_trials,
+      lambda c: np.linalg.norm(xyz2[c[:, 0], :2] - xyz2[c[:, 1], :2], axis=1)
+      >= UPRIGHT_MIN_SEPARATION,
+      'RANSAC: every minimal sample is degenerate (all cloud-2 keypoints within '
+      f'{UPRIGHT_MIN_SEPARATION} m of each other horizontally)')
+
+
+def ransac_upright(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
+                   inlier_threshold: float = 1.0, confidence: float = 0.99,
+                   max_trials: int = 10_000, min_trials: int = 10,
+                   batch_size: int = 512) -> RansacResult:
+  """RANSAC over 2-point upright hypotheses (`upright_fit`) with the adaptive stopping rule
+  of `ransac_sequential` for 2-point samples (N = log(1 - p) / log(1 - w^2)).
+  Correspondences xyz1[i] <-> xyz2[i] ([C, 3] metres), samples [>= max_trials + 1, 2]
+  from `draw_upright_samples`. The best hypothesis is refit on its inliers in all 6
+  degrees of freedom (Kabsch), its inliers recounted and the pose refit once more, so a
+  scan tilted by a few degrees still comes out exact."""
+  _check_samples(samples, max_trials)
+  thr2 = inlier_threshold * inlier_threshold
+
+  def score(batch):
+    t = upright_fit(xyz2[batch], xyz1[batch])
+    d = xyz2 @ np.swapaxes(t[:, :3, :3], -1, -2)
+    d += t[:, None, :3, 3]
+    d -= xyz1
+    d *= d
+    return np.sum(d.sum(-1) < thr2, axis=1)
+
+  n = len(xyz1)
+  best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)
+  size = min(FIRST_BATCH, batch_size)
+  while needed > trials and trials <= max_trials:
+    batch = samples[trials: min(trials + size, max_trials + 1)]
+    for s in score(batch).tolist():
+      if s >= best_score:
+        best_score, best_trial = s, trials
+        w = s / n
+        p_fail = min(max(1.0 - w * w, np.finfo(float).eps), 1.0 - np.finfo(float).eps)
+        needed = max(float(min_trials), np.log(1.0 - confidence) / np.log(p_fail))
+      trials += 1
+      if not needed > trials or trials > max_trials:
+        break
+    size = min(2 * size, batch_size)
+  residual = lambda t: np.sum((xyz2 @ t[:3, :3].T + t[:3, 3] - xyz1) ** 2, -1)
+  transform = upright_fit(xyz2[samples[best_trial]], xyz1[samples[best_trial]])
+  inliers = residual(transform) < thr2
+  for _ in range(2):
+    if inliers.sum() < 3:
+      break
+    transform = kabsch(xyz2[inliers], xyz1[inliers])
+    inliers = residual(transform) < thr2
+  return RansacResult(transform, inliers, trials)

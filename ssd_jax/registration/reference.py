@@ -56,10 +56,12 @@ def _search(o3d, radius: float, max_nn: int | None):
 
 
 def open3d_register(points1: np.ndarray, points2: np.ndarray, seed: int = 0,
-                    settings: str = 'paper') -> tuple[np.ndarray, dict]:
+                    settings: str = 'paper') -> tuple[np.ndarray, dict, dict]:
   """The plain Open3D pipeline on two clouds [N, 3] metres with the searches of
   `SETTINGS[settings]` -> (T_12 [4, 4] mapping cloud 2 into cloud 1's frame,
-  {stage: seconds} for features (both clouds), matching, ransac)."""
+  {stage: seconds} for features (both clouds), matching, ransac, {'matches': K1,
+  'inliers': RANSAC's correspondence set size, 'fitness', 'inlier_rmse'} as Open3D's
+  `RegistrationResult` gives them)."""
   if settings not in SETTINGS:
     raise ValueError(f'settings must be one of {sorted(SETTINGS)}, got {settings!r}')
   search = SETTINGS[settings]
@@ -93,5 +95,7 @@ def open3d_register(points1: np.ndarray, points2: np.ndarray, seed: int = 0,
       reg.TransformationEstimationPointToPoint(False), 3, [],
       reg.RANSACConvergenceCriteria(10_000, 0.99))
   t3 = time.perf_counter()
-  return np.asarray(result.transformation), {'features': t1 - t0, 'matching': t2 - t1,
-                                             'ransac': t3 - t2}
+  stats = {'matches': len(nn), 'inliers': len(result.correspondence_set),
+           'fitness': float(result.fitness), 'inlier_rmse': float(result.inlier_rmse)}
+  return (np.asarray(result.transformation),
+          {'features': t1 - t0, 'matching': t2 - t1, 'ransac': t3 - t2}, stats)

@@ -9,7 +9,8 @@ makes real ground rings look thick.
 Materials change the returns: glass drops most of them and foliage scatters
 them along the ray. Grazing incidence and long range drop returns more often,
 as real sensors do. Points come back in the sensor frame (x forward, y left,
-z up), like KITTI's velodyne files.
+z up), like KITTI's velodyne files. `LidarModel.for_sensor` builds the other units of
+`ssd_jax.sensors` (16-, 32-, 128-beam spinning, a 120-degree solid-state unit).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import dataclasses
 
 import numpy as np
 
+from ssd_jax import sensors
 from ssd_jax.synthetic.scene import Label, Scene
 
 
@@ -52,6 +54,7 @@ class LidarModel:
   foliage_dropout: float = 0.3
   foliage_scatter: float = 0.3
   mount_height: float = 1.73
+  horizontal_fov: float = 360.0      # degrees around x (forward); < 360: a sector
 
   def __post_init__(self):
     if self.upper_beams < 0 or self.lower_beams < 0 or self.num_beams < 1:
@@ -59,6 +62,8 @@ class LidarModel:
                        f'lower_beams={self.lower_beams}')
     if not 0 < self.azimuth_step <= 45:
       raise ValueError(f'azimuth_step must be in (0, 45] degrees, got {self.azimuth_step}')
+    if not 0 < self.horizontal_fov <= 360:
+      raise ValueError(f'horizontal_fov must be in (0, 360] degrees, got {self.horizontal_fov}')
     check_sensor_fields(self, ('dropout', 'glass_dropout', 'foliage_dropout'),
                         ('range_noise', 'beam_range_bias', 'beam_elevation_error',
                          'foliage_scatter'))
@@ -73,6 +78,11 @@ class LidarModel:
     if unknown:
       raise ValueError(f'unknown LiDAR settings {sorted(unknown)}; known: {sorted(fields)}')
     return cls(**values)
+
+  @classmethod
+  def for_sensor(cls, name: str, **overrides) -> 'LidarModel':
+    """The beam pattern of `sensors.SENSORS[name]` with this model's noise and dropout."""
+    return cls(**{**sensors.get(name).lidar_settings(), **overrides})
 
   @property
   def num_beams(self) -> int:
@@ -91,7 +101,10 @@ class LidarModel:
 
   def directions(self, azimuth_offset: float, elevation_error=0.0) -> np.ndarray:
     """Unit ray directions [B * A, 3] in the sensor frame for one revolution, beam-major."""
-    az = np.radians(np.arange(0.0, 360.0, self.azimuth_step) + azimuth_offset)
+    az = np.arange(0.0, 360.0, self.azimuth_step) + azimuth_offset
+    if self.horizontal_fov < 360:
+      az = az[np.abs((az + 180.0) % 360.0 - 180.0) <= self.horizontal_fov / 2]
+    az = np.radians(az)
     el = self.elevations() + elevation_error
     ce = np.cos(el)[:, None]
     return np.stack([ce * np.cos(az), ce * np.sin(az),

@@ -1,0 +1,25 @@
+"""The register command's defaults (farthest-point keypoints, upright RANSAC) on the
+README's 64-beam sets, beside which the paper's protocol rows were measured.
+
+Command (after the main job's synthetic set and `experiments.make_real_pairs`; ~10 min):
+
+    python -m experiments.evaluate --config=configs/register_defaults.py \
+        --workdir=runs/register_defaults
+
+Expected (2026-12-03, 2-core CPU VM): farthest-point keypoints + ours, upright RANSAC,
+100 % on all three sets (KITTI-style 106, push-broom 53, real re-scans 80); with FPFH
+99.1 / 100 / 100 %. docs/cross_sensor.md has the cross-sensor side.
+"""
+
+from ssd_jax.configs import evaluation
+
+
+def get_config():
+  config = evaluation.get_config()
+  config.rows = ('auto+ours+upright', 'auto+fpfh+upright')
+  config.evals.kitti = evaluation.registration('data_cache/synthetic_small/test_kitti',
+                                               title='KITTI-style synthetic')
+  config.evals.oxford = evaluation.registration('data_cache/synthetic_small/test_oxford',
+                                                title='Oxford-style push-broom synthetic')
+  config.evals.real = evaluation.registration('data_cache/real_pairs', title='Real re-scans')
+  return config

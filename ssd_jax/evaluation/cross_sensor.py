@@ -1,0 +1,137 @@
+"""Cross-sensor registration: every row of a test set whose pairs.tsv names the sensors
+and distance of each pair, summarised as a sensor x distance matrix.
+
+Each cell holds success (RTE < 2 m and Euler-sum RRE < 5 degrees), RTE / RRE over its
+successful pairs and the inlier ratio (RANSAC inliers / nearest-neighbour matches, mean
+over its pairs). Besides the keypoint x descriptor rows of the project's pipeline, the
+row `open3d` is Open3D's own pipeline with the paper's searches
+(`registration.reference`): the outside reference the matrix is read against.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Mapping, Sequence, TextIO
+
+import jax
+import numpy as np
+from tqdm import auto as tqdm
+
+from ssd_jax import distributed
+from ssd_jax.evaluation import feature_store, tables
+from ssd_jax.registration import metrics, reference
+
+REFERENCE_ROW = 'open3d'
+REFERENCE_LABEL = 'Open3D ISS + FPFH (paper searches)'
+
+
+def label(row: str) -> str:
+  return REFERENCE_LABEL if row == REFERENCE_ROW else feature_store.row_label(row)
+
+
+def register_reference(pairs: Sequence, store: feature_store.FeatureStore, *, seed: int = 0,
+                       log: TextIO | None = None, progress: bool = True,
+                       desc: str = 'open3d') -> list[dict]:
+  """Open3D's pipeline (paper searches) on every pair -> per-pair results in
+  `registration.register_pairs`' layout (row 'open3d'); RANSAC of pair n is seeded with
+  seed * 1,000,003 + n. A pair where ISS finds fewer than 3 keypoints fails with its
+  `error`, as the plain pipeline would stop there."""
+  one_process = jax.process_count() == 1
+
+  def register(n: int, pair) -> dict:
+    res = {'row': REFERENCE_ROW, 'sequence': pair.sequence, 'idx1': pair.idx1,
+           'idx2': pair.idx2}
+    try:
+      t, _, stats = reference.open3d_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2),
+                                              seed * 1_000_003 + n, 'paper')
+    except ValueError as e:
+      res.update(trials=0, inliers=0, matches=0, rte=float('inf'), rre=float('inf'),
+                 rre_geodesic=float('inf'), success=False, error=str(e))
+    else:
+      res.update(trials=0, inliers=stats['inliers'], matches=stats['matches'],
+                 **metrics.registration_errors(pair.transform, t))
+    if log is not None and one_process:
+      log.write(json.dumps(res) + '\n')
+    return res
+
+  results = distributed.map_items(
+      register, pairs, lambda ns: tqdm.tqdm(ns, desc=desc, unit='pair', disable=not progress))
+  if log is not None and not one_process:
+    for res in results:
+      log.write(json.dumps(res) + '\n')
+  return list(results)
+
+
+def distance_bin(distance: float, bins: Sequence[Sequence[float]]) -> str | None:
+  """'lo-hi m' of the bin holding `distance` metres, None outside every bin."""
+  for lo, hi in bins:
+    if lo <= distance < hi:
+      return f'{lo:g}-{hi:g} m'
+  return None
+
+
+def _cell(results: list[dict]) -> dict:
+  s = metrics.summarize(results)
+  ratios = [r['inliers'] / r['matches'] for r in results if r.get('matches')]
+  return {**s, 'inlier_ratio': float(np.mean(ratios)) if ratios else float('nan')}
+
+
+def matrix(results: Mapping[str, list[dict]], info: Mapping[tuple[int, int], dict],
+           bins: Sequence[Sequence[float]]) -> dict:
+  """{row: {(sensor, bin): cell, (sensor, 'all'): ..., ('all', bin): ..., ('all', 'all')}}
+  where a cell is `metrics.summarize` plus the mean inlier ratio. `sensor` is the unit of
+  cloud 2 (cloud 1 is the set's reference unit)."""
+  out = {}
+  for row, per_pair in results.items():
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in per_pair:
+      meta = info[r['idx1'], r['idx2']]
+      b = distance_bin(meta['distance_m'], bins)
+      if b is None:
+        continue
+      for key in ((meta['sensor2'], b), (meta['sensor2'], 'all'), ('all', b), ('all', 'all')):
+        groups.setdefault(key, []).append(r)
+    out[row] = {key: _cell(rs) for key, rs in groups.items()}
+  return out
+
+
+def outputs(cells: Mapping[str, dict], rows: Sequence[str], missing: Mapping[str, str],
+            sensors: Sequence[str], bins: Sequence[Sequence[float]], workdir: str,
+            description: str, name: str) -> str:
+  """WORKDIR/{name}.md (success summary, one success matrix per row, the detail table)
+  and {name}.csv (one line per row x sensor x distance cell)."""
+  bin_labels = [distance_bin(lo, bins) for lo, _ in bins]
+  ran = [r for r in rows if r in cells]
+  pct = lambda c: tables.fmt(100 * c['success_rate'], 1) if c else '-'
+  header = ['method', 'all'] + list(sensors) + bin_labels
+  summary = [[label(r)] + [pct(cells[r].get(key)) for key in
+                           [('all', 'all')] + [(s, 'all') for s in sensors]
+                           + [('all', b) for b in bin_labels]] for r in ran]
+  summary += [[label(r), f'missing ({feature_store.missing_reason(r, missing)})']
+              for r in rows if r not in cells]
+  parts = [f'Cross-sensor registration on {description}: cloud 1 from the set\'s reference '
+           'unit, cloud 2 from the unit of each column, its standpoint in the distance bin, '
+           'at any yaw. Success (%) = RTE < 2 m and RRE < 5°.\n',
+           tables.markdown_table(header, summary)]
+  csv_rows = []
+  for r in ran:
+    parts.append(f'\n{label(r)}: success % (pairs) per unit of cloud 2 x distance\n')
+    grid = [[s] + [f'{pct(cells[r].get((s, b)))} ({cells[r][(s, b)]["pairs"]})'
+                   if (s, b) in cells[r] else '-' for b in bin_labels] for s in sensors]
+    parts.append(tables.markdown_table(['unit'] + bin_labels, grid))
+    for s in list(sensors) + ['all']:
+      for b in bin_labels + ['all']:
+        c = cells[r].get((s, b))
+        if c:
+          csv_rows.append([r, s, b, c['pairs'], f'{100 * c["success_rate"]:.1f}',
+                           tables.fmt(c['rte'], 3), tables.fmt(c['rre'], 3),
+                           tables.fmt(c['inlier_ratio'], 4)])
+  detail_header = ['method', 'unit', 'distance', 'pairs', 'success (%)', 'RTE (m)', 'RRE (°)',
+                   'inlier ratio']
+  tables.write_csv(os.path.join(workdir, f'{name}.csv'), detail_header, csv_rows)
+  parts.append(f'\nRTE, RRE (successful pairs) and inlier ratio per cell: `{name}.csv`.\n')
+  text = '\n'.join(parts)
+  with open(os.path.join(workdir, f'{name}.md'), 'w') as f:
+    f.write(text)
+  return text

@@ -1,0 +1,99 @@
+"""LiDAR sensor models: the beam patterns of common units, and re-sampling a cloud to one.
+
+A spinning unit is a fan of beams at fixed elevations turned about z; a solid-state or
+front-facing unit sees only a horizontal sector. The presets follow the data sheets:
+
+    name     like                      beams  vertical field (deg)        azimuth step  horizontal
+    vlp16    Velodyne VLP-16 (Puck)       16  +15 ... -15, 2.0 apart     0.2           360
+    hdl32    Velodyne HDL-32E             32  +10.67 ... -30.67, 1.33    0.16          360
+    hdl64    Velodyne HDL-64E (KITTI)     64  +2 ... -24.33, 1/3 and 1/2 0.17          360
+    vls128   Velodyne VLS-128 / OS-128   128  +15 ... -25, ~0.31         0.2           360
+    front120 Hesai AT128-like (solid)    128  +12.9 ... -12.5, 0.2       0.1           120 (x fwd)
+
+`ssd_jax.synthetic.lidar` casts their rays into a simulated scene; `resample` keeps the
+points of a real cloud that one of their beams would have hit from a given standpoint,
+which is how the cross-sensor real pairs are made (`ssd_jax.data.rescan`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class Sensor:
+  """A beam pattern; angles in degrees, distances in metres.
+
+  blocks: (beams, top elevation, bottom elevation) per block of evenly spaced beams.
+  """
+  name: str
+  like: str
+  blocks: tuple[tuple[int, float, float], ...]
+  azimuth_step: float
+  horizontal_fov: float = 360.0
+  max_range: float = 80.0
+
+  def elevations(self) -> np.ndarray:
+    """Beam elevations [B] degrees, top beam first."""
+    return np.concatenate([np.linspace(top, bottom, n) for n, top, bottom in self.blocks])
+
+  @property
+  def num_beams(self) -> int:
+    return sum(n for n, _, _ in self.blocks)
+
+  def lidar_settings(self) -> dict:
+    """The `synthetic.lidar.LidarModel` fields of this pattern (two blocks at most)."""
+    upper, lower = self.blocks[0], self.blocks[1] if len(self.blocks) > 1 else (0, 0.0, 0.0)
+    return dict(upper_beams=upper[0], upper_elevation=upper[1:], lower_beams=lower[0],
+                lower_elevation=lower[1:], azimuth_step=self.azimuth_step,
+                horizontal_fov=self.horizontal_fov, max_range=self.max_range)
+
+
+SENSORS = {s.name: s for s in (
+    Sensor('vlp16', 'Velodyne VLP-16', ((16, 15.0, -15.0),), 0.2, max_range=100.0),
+    Sensor('hdl32', 'Velodyne HDL-32E', ((32, 10.67, -30.67),), 0.16, max_range=80.0),
+    Sensor('hdl64', 'Velodyne HDL-64E (KITTI)', ((32, 2.0, -8.33), (32, -8.83, -24.33)), 0.17,
+           max_range=80.0),
+    Sensor('vls128', 'Velodyne VLS-128 / Ouster OS-128', ((128, 15.0, -25.0),), 0.2,
+           max_range=100.0),
+    Sensor('front120', 'Hesai AT128-like solid state, 120 deg forward',
+           ((128, 12.9, -12.5),), 0.1, horizontal_fov=120.0, max_range=80.0),
+)}
+
+
+def get(name: str) -> Sensor:
+  """The preset `name`, or a ValueError listing the presets."""
+  if name not in SENSORS:
+    raise ValueError(f'unknown sensor {name!r}; known: {", ".join(SENSORS)}')
+  return SENSORS[name]
+
+
+def in_field_of_view(points: np.ndarray, horizontal_fov: float) -> np.ndarray:
+  """[N] bool: points [N, 3] (sensor frame, x forward) within +-fov/2 degrees of x."""
+  if horizontal_fov >= 360:
+    return np.ones(len(points), bool)
+  azimuth = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
+  return np.abs(azimuth) <= horizontal_fov / 2
+
+
+def resample(points: np.ndarray, sensor: Sensor, width: float = 0.2) -> np.ndarray:
+  """Indices of the points [N, 3] (metres, in the sensor's frame: the sensor at the
+  origin, x forward, z up) that `sensor` would return: within `width` degrees of
+  elevation of one of its beams, inside its horizontal field of view and range.
+
+  A denser scan seen from the same standpoint becomes the sparser unit's rings; the
+  azimuth step is finer than the 0.2 m voxel grid the clouds are put on within tens of
+  metres, so it is not imposed.
+  """
+  points = np.asarray(points, np.float64)
+  rng_xy = np.linalg.norm(points[:, :2], axis=1)
+  elev = np.degrees(np.arctan2(points[:, 2], rng_xy))
+  beams = np.sort(sensor.elevations())
+  pos = np.clip(np.searchsorted(beams, elev), 1, len(beams) - 1) if len(beams) > 1 else 0
+  nearest = (np.minimum(np.abs(elev - beams[pos - 1]), np.abs(elev - beams[pos]))
+             if len(beams) > 1 else np.abs(elev - beams[0]))
+  keep = ((nearest <= width) & in_field_of_view(points, sensor.horizontal_fov)
+          & (np.linalg.norm(points, axis=1) <= sensor.max_range))
+  return np.flatnonzero(keep)

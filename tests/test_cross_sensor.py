@@ -1,0 +1,124 @@
+"""Cross-sensor test sets (synthetic and real re-scans) and their sensor x distance matrix."""
+
+import csv
+
+import ml_collections
+import numpy as np
+import pytest
+from scipy import spatial
+
+from ssd_jax import sensors
+from ssd_jax.configs import cross_sensor as cross_sensor_eval
+from ssd_jax.configs import cross_sensor_data
+from ssd_jax.data import benchmarks, io, rescan
+from ssd_jax.evaluation import evaluators
+from ssd_jax.synthetic import cross_sensor, dataset
+from tests.conftest import shared_path, tiny_synthetic_config
+
+
+def _tiny_config():
+  config = tiny_synthetic_config()
+  config.cross_sensor = cross_sensor_data.get_config().cross_sensor
+  config.cross_sensor.sensors = ('vlp16', 'front120')
+  config.cross_sensor.distance_bins = ((5.0, 10.0), (10.0, 20.0))
+  config.cross_sensor.num_scenes = 1
+  config.cross_sensor.pairs_per_cell = 1
+  return config
+
+
+@pytest.fixture(scope='module')
+def tiny_set(tmp_path_factory):
+  out = tmp_path_factory.mktemp('cross') / 'synthetic'
+  cross_sensor.generate(_tiny_config(), out)
+  return out
+
+
+def _overlap(pair):
+  """Share of cloud-2 points within 0.3 m of cloud 1 under the ground truth."""
+  c1, c2 = io.read_cloud(pair.cloud1), io.read_cloud(pair.cloud2)
+  moved = c2 @ pair.transform[:3, :3].T + pair.transform[:3, 3]
+  return np.mean(spatial.cKDTree(c1).query(moved)[0] < 0.3)
+
+
+def test_synthetic_pairs_have_their_units_distances_and_exact_poses(tiny_set):
+  pairs = benchmarks.read_registration_set(tiny_set)
+  info = benchmarks.read_pair_info(tiny_set)
+  assert len(pairs) == 4 and len(info) == 4
+  bins = sorted(((info[p.idx1, p.idx2]['sensor2'], info[p.idx1, p.idx2]['distance_m'] >= 10)
+                 for p in pairs))
+  assert bins == [('front120', False), ('front120', True), ('vlp16', False), ('vlp16', True)]
+  for pair in pairs:
+    meta = info[pair.idx1, pair.idx2]
+    assert 5 <= meta['distance_m'] < 20
+    assert meta['sensor1'] == 'hdl64' and meta['sensor2'] in ('vlp16', 'front120')
+    assert _overlap(pair) > 0.1, meta         # the true pose lays one scan on the other
+    wrong = pair.transform.copy()
+    wrong[:3, 3] += 2.0
+    assert _overlap(benchmarks.RegistrationPair('', 0, 0, pair.cloud1, pair.cloud2, wrong)) \
+        < 0.5 * _overlap(pair)
+    c2 = io.read_cloud(pair.cloud2)
+    if meta['sensor2'] == 'front120':   # a 120-degree sector in its own frame
+      assert np.abs(np.degrees(np.arctan2(c2[:, 1], c2[:, 0]))).max() < 61
+  # The same config reuses the set; another one is refused.
+  assert cross_sensor.generate(_tiny_config(), tiny_set)['reused']
+  other = _tiny_config()
+  other.cross_sensor.pairs_per_cell = 2
+  with pytest.raises(dataset.SyntheticConfigError, match='different config'):
+    cross_sensor.generate(other, tiny_set)
+
+
+@pytest.mark.parametrize('field, value, message', [
+    ('sensors', ('vlp16', 'puck'), "unknown sensor 'puck'"),
+    ('distance_bins', ((10.0, 5.0),), 'each bin must be'),
+    ('distance_bins', ((5.0, 500.0),), 'longer than a drive'),
+])
+def test_bad_cross_sensor_configs_are_refused(field, value, message):
+  config = _tiny_config()
+  config.cross_sensor[field] = value
+  with pytest.raises(dataset.SyntheticConfigError, match=message):
+    cross_sensor.check_config(config)
+
+
+def test_real_rescan_by_another_unit(tmp_path):
+  source = shared_path('example', 'kitti_00_001554.bin')
+  rows = rescan.make_cross_sensor_set([source], tmp_path, ('vlp16',), ((5.0, 10.0),))
+  assert len(rows) == 1 and 5 <= rows[0]['distance_m'] < 10
+  pair = benchmarks.read_registration_set(tmp_path)[0]
+  c2 = io.read_cloud(pair.cloud2)
+  # Cloud 2 is in the virtual unit's frame: its points lie near the 16 beams (the voxel
+  # grid and noise blur them a little), where the source scan's elevations are spread.
+  near = lambda pts: np.mean(np.min(np.abs(np.degrees(np.arctan2(
+      pts[:, 2], np.linalg.norm(pts[:, :2], axis=1)))[:, None]
+      - sensors.get('vlp16').elevations()[None]), axis=1) < 0.4)
+  assert near(c2) > 0.8 > 0.5 > near(io.read_cloud(source))
+  assert _overlap(pair) > 0.3
+  assert benchmarks.read_pair_info(tmp_path)[pair.idx1, pair.idx2]['sensor2'] == 'vlp16'
+
+
+def test_pair_info_errors_name_the_file(tmp_path):
+  with pytest.raises(io.CloudFileError, match='pairs.tsv: missing'):
+    benchmarks.read_pair_info(tmp_path)
+  (tmp_path / 'pairs.tsv').write_text('idx1\tidx2\n')
+  with pytest.raises(io.CloudFileError, match='the header must be'):
+    benchmarks.read_pair_info(tmp_path)
+
+
+def test_cross_sensor_evaluation_writes_the_matrix(tiny_set, tmp_path):
+  config = cross_sensor_eval.get_config()
+  config.data_root = str(tiny_set.parent)
+  config.fpfh_max_nn = 200
+  del config.evals['real']
+  config.evals.synthetic.dataset = 'synthetic'
+  config.evals.synthetic.distance_bins = ((5.0, 10.0), (10.0, 20.0))
+  config.evals.synthetic.rows = ('iss+fpfh', 'auto+fpfh+upright', 'open3d')
+  _, text = evaluators.evaluate(config, tmp_path, log=lambda s: None)
+  assert '| method | all | vlp16 | front120 | 5-10 m | 10-20 m |' in text
+  assert 'Open3D ISS + FPFH (paper searches)' in text and 'upright RANSAC' in text
+  with open(tmp_path / 'synthetic.csv') as f:
+    rows = list(csv.DictReader(f))
+  # 3 methods x (2 units + all) x (2 bins + all) cells, each with its pair count.
+  assert len(rows) == 27 and {r['pairs'] for r in rows if r['unit'] != 'all'
+                              and r['distance'] != 'all'} == {'1'}
+  assert all(0 <= float(r['success (%)']) <= 100 for r in rows)
+  lines = (tmp_path / 'synthetic_pairs.jsonl').read_text().splitlines()
+  assert len(lines) == 12 and '"row": "open3d"' in lines[-1]
