@@ -7,7 +7,8 @@ Command (what `experiments.adapt` runs, with its model card and export):
 
 `configs/cpu_robust.py` (the recipe of `ours`: the self-rotation over the whole circle,
 two samplings of each scan in the two branches) started from `ours`' weights, at a third
-of its learning rate, decayed to 0 over 1,500 steps: ~4-5 minutes on 2 CPU cores.
+of its learning rate, decayed to 0 over 1,500 steps: under 10 minutes on 2 CPU
+cores (docs/benchmarks.md).
 Each scan must be one sweep centred on its sensor (z up), as the sensor wrote it or
 voxelised. docs/cross_sensor.md measures it on 16-beam scans the shipped model never saw.
 """

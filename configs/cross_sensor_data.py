@@ -1,6 +1,6 @@
 """The cross-sensor test sets: other LiDARs, farther apart, any relative yaw.
 
-Command (~3 minutes on 2 CPU cores):
+Command (~1-2 minutes on 2 CPU cores):
 
     python -m experiments.make_cross_sensor --config=configs/cross_sensor_data.py \
         --out=data_cache/cross_sensor

@@ -10,7 +10,8 @@ The scans (.bin/.npy/.ply/.pcd/.las/.laz, one sweep each, centred on the sensor,
 train the self-supervised objective of the paper, which needs no poses. OUT/run holds
 the training run (rerun the command to resume it); OUT holds the exported model
 (config.json, weights.msgpack) and MODEL_CARD.md (base model, scans, steps, wall time,
-machine, command). ~4-5 minutes on 2 CPU cores at the default 1,500 steps.
+machine, command). Under 10 minutes on 2 CPU cores at the default
+1,500 steps (docs/benchmarks.md).
 """
 
 import datetime

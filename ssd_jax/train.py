@@ -23,8 +23,7 @@ import numpy as np
 import optax
 from tqdm import auto as tqdm
 
-from ssd_jax import (checkpoint, config_checks, distributed, inference, network, objective,
-                     pretrained)
+from ssd_jax import checkpoint, config_checks, distributed, network, objective, pretrained
 from ssd_jax.config_checks import ConfigError
 from ssd_jax.data import datasets
 

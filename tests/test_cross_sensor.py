@@ -2,7 +2,6 @@
 
 import csv
 
-import ml_collections
 import numpy as np
 import pytest
 from scipy import spatial

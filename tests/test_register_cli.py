@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 
+import laspy
 import numpy as np
 import open3d as o3d
 import pytest
@@ -269,10 +270,8 @@ def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
 
 
 def test_las_and_laz_register_like_the_same_points_in_ply(tiny_set, tmp_path):
-  import laspy  # the reader library writes the test files
   pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
   offset = np.array([500_000.0, 4_000_000.0, 100.0])   # UTM-like map coordinates
-  paths = {}
   for k, cloud in enumerate((pair.cloud1, pair.cloud2)):
     pts = io.read_cloud(cloud).astype(np.float64) + offset
     header = laspy.LasHeader(point_format=3, version='1.2')
