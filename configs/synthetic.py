@@ -70,8 +70,8 @@ def get_config() -> ml_collections.ConfigDict:
   oxford.voxel_size = 0.2
   # 'pushbroom' (default): a 2D line scanner's lines accumulated over 2 crop_radius metres
   # of one pass, every line_spacing metres (ssd_jax/synthetic/pushbroom.py), as RobotCar's
-  # test models were made. 'spinning': one HDL-64 scan cropped to crop_radius, the models
-  # the results before 2026-12-02 were measured on (docs/synthetic_data.md).
+  # test models were made. 'spinning': one HDL-64 scan cropped to crop_radius (the spinning
+  # Oxford-style set of docs/results.md; docs/synthetic_data.md).
   oxford.sensor = 'pushbroom'
   oxford.line_spacing = 0.2
 

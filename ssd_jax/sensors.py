@@ -45,6 +45,9 @@ class Sensor:
 
   def lidar_settings(self) -> dict:
     """The `synthetic.lidar.LidarModel` fields of this pattern (two blocks at most)."""
+    if len(self.blocks) > 2:
+      raise ValueError(f'{self.name}: the simulator models at most 2 blocks of beams, '
+                       f'got {len(self.blocks)}')
     upper, lower = self.blocks[0], self.blocks[1] if len(self.blocks) > 1 else (0, 0.0, 0.0)
     return dict(upper_beams=upper[0], upper_elevation=upper[1:], lower_beams=lower[0],
                 lower_elevation=lower[1:], azimuth_step=self.azimuth_step,

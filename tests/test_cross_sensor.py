@@ -1,6 +1,9 @@
 """Cross-sensor test sets (synthetic and real re-scans) and their sensor x distance matrix."""
 
 import csv
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -13,6 +16,8 @@ from ssd_jax.data import benchmarks, io, rescan
 from ssd_jax.evaluation import evaluators
 from ssd_jax.synthetic import cross_sensor, dataset
 from tests.conftest import shared_path, tiny_synthetic_config
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def _tiny_config():
@@ -121,3 +126,22 @@ def test_cross_sensor_evaluation_writes_the_matrix(tiny_set, tmp_path):
   assert all(0 <= float(r['success (%)']) <= 100 for r in rows)
   lines = (tmp_path / 'synthetic_pairs.jsonl').read_text().splitlines()
   assert len(lines) == 12 and '"row": "open3d"' in lines[-1]
+
+
+def test_unlabeled_scans_of_one_unit(tmp_path):
+  n = cross_sensor.write_sensor_scans(_tiny_config(), 'vlp16', tmp_path, num_scenes=1,
+                                      spacing=20.0)
+  files = sorted(tmp_path.glob('*.bin'))
+  assert n == len(files) >= 3
+  pts = io.read_cloud(files[0])
+  el = np.degrees(np.arctan2(pts[:, 2], np.linalg.norm(pts[:, :2], axis=1)))
+  near = np.min(np.abs(el[:, None] - sensors.get('vlp16').elevations()[None]), axis=1) < 0.5
+  assert near.mean() > 0.8 and np.abs(el).max() < 16   # a VLP-16's rings, nothing above
+
+
+def test_make_real_pairs_names_a_bad_unit(tmp_path):
+  run = subprocess.run([sys.executable, '-m', 'experiments.make_real_pairs', '--sensor=vlp32',
+                        f'--out={tmp_path}'], cwd=ROOT, capture_output=True, text=True,
+                       timeout=120)
+  assert run.returncode == 1 and run.stderr.strip().splitlines()[-1] == (
+      "error: --sensor: unknown sensor 'vlp32'; known: vlp16, hdl32, hdl64, vls128, front120")

@@ -254,16 +254,14 @@ def _replay(score, samples, n, confidence, max_trials, min_trials, batch_size
 UPRIGHT_MIN_SEPARATION = 0.5   # metres: a 2-point sample closer than this fixes no yaw
 
 
-def upright_fit(src: np.ndarray, dst: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
+def upright_fit(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
   """Least-squares turn about z and translation T [..., 4, 4] with T src ≈ dst;
-  src, dst [..., n, 3] (n >= 2), optional weights [..., n] >= 0."""
-  if weight is None:
-    weight = np.ones(src.shape[:-1])
-  w = weight / np.maximum(weight.sum(-1, keepdims=True), 1e-12)
+  src, dst [..., n, 3] (n >= 2)."""
+  w = np.full(src.shape[:-1], 1.0 / src.shape[-2])
   mu_s = np.einsum('...n,...nk->...k', w, src)
   mu_d = np.einsum('...n,...nk->...k', w, dst)
   s, d = src - mu_s[..., None, :], dst - mu_d[..., None, :]
-  # The yaw maximising sum w <R s, d> in the xy-plane (2-D Kabsch).
+  # The yaw maximising sum <R s, d> in the xy-plane (2-D Kabsch).
   sxx = np.einsum('...n,...n->...', w, s[..., 0] * d[..., 0] + s[..., 1] * d[..., 1])
   sxy = np.einsum('...n,...n->...', w, s[..., 0] * d[..., 1] - s[..., 1] * d[..., 0])
   yaw = np.arctan2(sxy, sxx)
