@@ -8,16 +8,18 @@ Command (the sets come first, configs/cross_sensor_data.py):
 
 Rows: `open3d`, Open3D's own ISS + FPFH pipeline with the paper's searches
 (ssd_jax/registration/reference.py); the paper's protocol (ISS keypoints, RANSAC over any
-rotation) with FPFH and each learned descriptor; the same descriptors with the register
-command's defaults (farthest-point keypoints, upright RANSAC).
+rotation) with FPFH and each learned descriptor; the same descriptors with farthest-point
+keypoints and upright RANSAC; FPFH and ours with the register command's defaults (the
+same, RANSAC's 10 best poses verified against the clouds).
 Writes WORKDIR/<set>.md (summary, one success matrix per method) and <set>.csv (success,
 RTE, RRE and inlier ratio per method x unit x distance). docs/cross_sensor.md has the
 protocol and every cell.
 
-Expected (2026-12-03, 2-core CPU VM, ~1 hour with every row): real re-scans (96 pairs),
-defaults + ours 91.7 %, Open3D's pipeline 38.5 % (its RANSAC is not repeatable: +-1
-pair), paper protocol ISS + ours 49.0 %, ISS + FPFH 36.5 %; synthetic (120 pairs),
-defaults + FPFH 49.2 %, defaults + ours 43.3 %, Open3D 15.8 %.
+Expected (2-core CPU VM, ~1.5 hours with every row): real re-scans (96 pairs), defaults +
+ours 99.0 %, defaults + FPFH 94.8 %, farthest-point + upright ours 91.7 %, Open3D's pipeline
+38.5 % (its RANSAC is not repeatable: +-1 pair), paper protocol ISS + ours 49.0 %, ISS +
+FPFH 36.5 %; synthetic (120 pairs), defaults + FPFH 63.3 %, defaults + ours 58.3 %,
+farthest-point + upright FPFH 49.2 % / ours 43.3 %, Open3D 15.8 %.
 """
 
 import ml_collections
@@ -31,7 +33,8 @@ def cross_sensor(dataset, distance_bins, title):
       # The paper's protocol (ISS, RANSAC over any rotation), Open3D's own pipeline, and
       # the register command's defaults (farthest-point keypoints, upright RANSAC).
       'rows': ('open3d', 'iss+fpfh', 'iss+ours', 'iss+feat3dnet', 'auto+fpfh+upright',
-               'auto+ours+upright', 'auto+feat3dnet+upright'),
+               'auto+ours+upright', 'auto+feat3dnet+upright', 'auto+fpfh+upright+verify',
+               'auto+ours+upright+verify'),
       'distance_bins': distance_bins,   # metres; the columns of the matrix
   })
 

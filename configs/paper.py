@@ -31,6 +31,14 @@ def get_config() -> ml_collections.ConfigDict:
   data.prefetch = 4          # batches prepared ahead of the jitted step
   data.triplet_axes = 'scene'  # triplet objective: rotate clouds with poses.txt to scene axes
   data.triplet_positives = 'index'  # or 'self': each cloud its own positive (a control)
+  # Self-supervised objective: with chance rescan_rate per cloud, its second branch is a
+  # re-scan of it by a virtual unit of rescan_sensors (ssd_jax.sensors) standing
+  # rescan_shift metres away (datasets.RescanPairDataset), not the same points again.
+  # Still one unlabeled cloud per pair; 0 is the paper.
+  data.rescan_rate = 0.0
+  data.rescan_sensors = ('vlp16', 'hdl32', 'hdl64', 'vls128', 'front120')
+  data.rescan_shift = (2.0, 30.0)
+  data.rescan_views = 8          # re-scans per cloud (made once, cached)
 
   config.model = model = ml_collections.ConfigDict()
   model.descriptor_dim = 32      # D in {16, 32, 64, 128}
@@ -78,6 +86,9 @@ def get_config() -> ml_collections.ConfigDict:
   config.inference = inference = ml_collections.ConfigDict()
   inference.num_samples = 0
   inference.draws = 1
+  # Metres: the voxel grid of the training clouds, on which registration puts every cloud
+  # first (registration.pipeline.to_grid).
+  inference.voxel_size = 0.2
 
   config.train = train = ml_collections.ConfigDict()
   train.batch_size = 6

@@ -16,16 +16,24 @@ with its tutorial's (1 m / 30-neighbour normals, FPFH capped at 100 neighbours):
     compilation cache is warmed by one earlier run first, as any second use finds it;
     Open3D's as a plain script that imports Open3D, numpy and the file reader only);
   * warm: one pair in a process that has registered another pair before;
-  * batch: `--num_pairs` pairs in one process, each cloud's features once.
+  * batch: `--num_pairs` pairs in one process, each cloud's features once;
+  * dense (`--dense=N`): the first pair with each cloud densified to N points (every
+    point copied with 5 cm Gaussian jitter, the density of a 128-beam frame or a map
+    tile), registered by the command a user types with its defaults (the cloud put on
+    the model's 0.2 m grid first) in a new process, with its peak memory; Open3D's
+    pipeline on the same clouds after Open3D's own `voxel_down_sample(0.2)` (its
+    tutorial's first step; on millions of raw points its ISS does not finish).
 
 Prints one table: seconds per pair for features (both clouds), matching, RANSAC and
 the total, and the success rate (RTE < 2 m, RRE < 5 degrees).
 """
 
 import dataclasses
+import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 
 from absl import app
@@ -36,6 +44,7 @@ from tqdm import auto as tqdm
 from ssd_jax import cli, pretrained
 from ssd_jax.data import benchmarks, clean, io
 from ssd_jax.logging_utils import quiet_libraries
+from ssd_jax.data import preprocess
 from ssd_jax.registration import features, metrics, pipeline
 from ssd_jax.registration.reference import SETTINGS, open3d_register
 
@@ -46,6 +55,8 @@ flags.DEFINE_integer('cold_pairs', 3, 'Pairs timed as one new process each.')
 flags.DEFINE_integer('fpfh_max_nn', features.FPFH_MAX_NN, "The project's FPFH neighbour cap.")
 flags.DEFINE_list('draws', [], 'Learned rows: one per value, describing with this many '
                   "samplings of each ball (default: the shipped model's own setting).")
+flags.DEFINE_integer('dense', 0, 'Points per cloud of the dense regime (0: no dense rows), '
+                     'e.g. 2000000.')
 flags.DEFINE_list('methods', ['fpfh', 'learned', 'open3d_paper', 'open3d_tutorial'],
                   "Rows: fpfh (the project's ISS + FPFH), learned (ISS + ours), open3d_paper "
                   "and open3d_tutorial (the plain Open3D pipeline with the paper's or its "
@@ -106,6 +117,52 @@ def _cold(method: str, pair, draws: int) -> float:
   return time.perf_counter() - t0
 
 
+def _densify(path, n: int, out: str, seed: int) -> str:
+  """The cloud at `path` as n points (each point copied with 5 cm jitter) in OUT (.bin)."""
+  rng = np.random.default_rng(seed)
+  pts = _read(path)
+  dense = pts[rng.integers(0, len(pts), n)] + rng.normal(0.0, 0.05, (n, 3))
+  dense.astype(np.float32).tofile(out)
+  return out
+
+
+def _dense_rows(pair, n: int) -> list:
+  """The dense regime's rows (see the module docstring)."""
+  rows = []
+  with tempfile.TemporaryDirectory() as tmp:
+    paths = [_densify(c, n, os.path.join(tmp, f'dense{k}.bin'), k)
+             for k, c in enumerate((pair.cloud1, pair.cloud2))]
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for descriptor in ('learned', 'fpfh'):
+      if descriptor not in FLAGS.methods:
+        continue
+      out_json = os.path.join(tmp, f'{descriptor}.json')
+      with open(os.path.join(tmp, 'stderr'), 'w+') as err:
+        t0 = time.perf_counter()
+        child = subprocess.Popen([sys.executable, '-m', 'experiments.register',
+                                  f'--cloud1={paths[0]}', f'--cloud2={paths[1]}',
+                                  f'--descriptor={descriptor}', f'--json={out_json}'], cwd=root,
+                                 stdout=subprocess.DEVNULL, stderr=err)
+        _, status, usage = os.wait4(child.pid, 0)   # this child's own peak memory
+        wall = time.perf_counter() - t0
+        if status:
+          err.seek(0)
+          raise SystemExit(f'error: the dense {descriptor} run failed: {err.read().strip()[-300:]}')
+      with open(out_json) as f:
+        t = np.array(json.load(f)['T_12'])
+      rows.append((f'register defaults, {descriptor} ({n:,} points per cloud)',
+                   f'dense: 1 pair, new process, peak {usage.ru_maxrss / 2**20:.2f} GiB', 1,
+                   {'total': wall}, metrics.registration_errors(pair.transform, t)['success']))
+    if 'open3d_tutorial' in FLAGS.methods:
+      t0 = time.perf_counter()
+      clouds = [preprocess.voxel_downsample(_read(p), 0.2, np.float64) for p in paths]
+      t, stages, _ = open3d_register(clouds[0], clouds[1], 0, 'tutorial')
+      rows.append((f"Open3D's pipeline, tutorial searches, voxel_down_sample(0.2) first",
+                   'dense: 1 pair, in process', 1, {**stages, 'total': time.perf_counter() - t0},
+                   metrics.registration_errors(pair.transform, t)['success']))
+  return rows
+
+
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
@@ -149,6 +206,8 @@ def main(argv):
     batch['total'] = (time.perf_counter() - t0) / len(pairs)
     rows.append((name, f'batch: {len(pairs)} pairs, one process', len(pairs), batch,
                  float(np.mean(success))))
+  if FLAGS.dense > 0:
+    rows += _dense_rows(pairs[0], FLAGS.dense)
   print(f'\n{FLAGS.dataset}; seconds per pair (mean)\n')
   print('| method | regime | pairs | features | matching | RANSAC | total | success |')
   print('|---|---|---|---|---|---|---|---|')

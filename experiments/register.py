@@ -3,14 +3,23 @@ r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into clou
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin \
         [--keypoints=auto|iss|learned|random] [--descriptor=fpfh|learned|learned,fpfh] \
         [--checkpoint=ours|RUN_DIR|EXPORT_DIR] [--groundtruth=DIR/groundtruths.txt] \
-        [--icp] [--draws=N] [--json=OUT.json] [--plot=OUT.png]
+        [--voxel=SIZE] [--verify=K] [--icp] [--draws=N] [--json=OUT.json] [--plot=OUT.png]
     # many pairs in one process: a list of pairs, or the consecutive scans of a folder
     python -m experiments.register --pairs=PAIRS.txt --out=DIR [--descriptor=learned]
     python -m experiments.register --sequence=SCANS_DIR --out=DIR [--groundtruth=...]
 
-Reads .bin (N x 3 / 4 / 6 float32 or float64 rows, detected or --format), .npy, .ply, .pcd. Learned
-descriptors and keypoints come from the shipped pretrained models (`ours`, and
-`ours_detector` for learned keypoints) unless --checkpoint names another.
+Every cloud is first put on the voxel grid the model was trained on (0.2 m for the shipped
+models and FPFH; --voxel=SIZE another, --voxel=0 every point as given), and the command
+says so with the point counts: a dense scan or a map tile of millions of points costs
+what a 0.2 m-voxel scan does. On a terminal each stage shows its progress (--progress
+forces it on a pipe too, --noprogress turns it off).
+
+By default: 1,024 farthest-point keypoints, upright RANSAC, and RANSAC's 10 best distinct
+poses checked against the clouds by ICP (--verify; docs/cross_sensor.md).
+
+Reads .bin (N x 3 / 4 / 6 float32 or float64 rows, detected or --format), .npy, .ply, .pcd,
+.las, .laz. Learned descriptors and keypoints come from the shipped pretrained models
+(`ours`, and `ours_detector` for learned keypoints) unless --checkpoint names another.
 With --groundtruth (a `groundtruths.txt` listing the pair by the clouds' file
 stems, e.g. 000000.bin / 000001.bin), the errors against it are printed too.
 
@@ -23,8 +32,10 @@ first scan's frame, KITTI's 12 numbers per line) and trajectory.png. PAIRS.txt h
 
 import csv
 import dataclasses
+import functools
 import json
 import os
+import sys
 import time
 
 from absl import app
@@ -50,15 +61,22 @@ flags.DEFINE_enum('ransac', 'upright', pipeline.ESTIMATORS,
                   "RANSAC's motion model: rigid (3-point samples, any rotation: the paper's) "
                   'or upright (2-point samples of a turn about z and a shift, for scans whose '
                   'z axis is up; refit in 6 degrees of freedom).')
+flags.DEFINE_integer('verify', 10, "Check RANSAC's this many distinct best poses against the "
+                     'clouds (ICP each, keep the one that lays the most of cloud 2 on cloud 1); '
+                     "0 keeps RANSAC's best as it is.")
 flags.DEFINE_list('descriptor', ['fpfh'], 'Descriptor(s): fpfh, learned; a list runs each.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model name, export folder or training workdir '
                     'for learned (default: the shipped ours / ours_detector).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding this pair (optional).')
-flags.DEFINE_bool('icp', False, 'Refine with point-to-point ICP (Open3D) after RANSAC.')
+flags.DEFINE_bool('icp', False, 'Refine with point-to-plane ICP (Open3D) after RANSAC.')
 flags.DEFINE_integer('seed', 0, 'RANSAC / random-keypoint seed.')
 flags.DEFINE_integer('draws', 0, 'Learned descriptors: average this many random samplings '
                      "of each ball (0: the model's own setting; fewer is faster, noisier).")
 flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m normal / FPFH searches.')
+flags.DEFINE_float('voxel', None, "Put each cloud on this grid (metres) first; default the "
+                   "model's (0.2 m: the shipped models and FPFH), 0 keeps every point.")
+flags.DEFINE_bool('progress', None, 'Show each stage on stderr (default: when stderr is a '
+                  'terminal).')
 flags.DEFINE_string('json', None, 'Write the results here.')
 flags.DEFINE_string('plot', None, 'Draw the clouds and inlier matches here (PNG).')
 flags.DEFINE_string('pairs', None, 'Batch mode: a file of "cloud1 cloud2" lines.')
@@ -99,6 +117,30 @@ def _check_writable(path: str | None) -> None:
     raise ValueError(f'{path}: cannot write a file there')
 
 
+def _show_progress() -> bool:
+  return FLAGS.progress if FLAGS.progress is not None else sys.stderr.isatty()
+
+
+def _voxel(model) -> float:
+  if FLAGS.voxel is not None and FLAGS.voxel < 0:
+    raise ValueError(f'--voxel must be >= 0 metres (0: every point), got {FLAGS.voxel}')
+  return pipeline.voxel_size_of(model) if FLAGS.voxel is None else FLAGS.voxel
+
+
+def _read_on_grid(path: str, voxel: float, say, seconds: dict | None = None) -> np.ndarray:
+  """The cloud at `path` (float64, the caller's coordinates) on the `voxel` m grid;
+  `say(line)` gets the one line of what was done, `seconds` the time of each step."""
+  t0 = time.perf_counter()
+  cloud = clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
+  t1 = time.perf_counter()
+  cloud, note = pipeline.to_grid(cloud, voxel)
+  if seconds is not None:
+    seconds.update(read=t1 - t0, grid=time.perf_counter() - t1)
+  if note:
+    say(f'voxel: {os.path.basename(path)}: {note}')
+  return cloud
+
+
 def _read_pairs(path: str) -> list[tuple[str, str]]:
   """'cloud1 cloud2' lines ('#' comments) -> paths, relative ones from the file's folder."""
   folder = os.path.dirname(os.path.abspath(path))
@@ -132,20 +174,24 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
   gt_pairs = groundtruth.read_groundtruths(FLAGS.groundtruth) if FLAGS.groundtruth else None
   features, errors = {}, []
 
+  voxel = _voxel(model)
+  say = tqdm.tqdm.write if _show_progress() else print
+
+  @functools.lru_cache(maxsize=4)   # the clouds of the pair at hand, for verification
   def read(path):
-    return clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
+    return _read_on_grid(path, voxel, say)
 
   def features_of(path):   # each cloud once (a few kB): scan i serves pairs i-1 and i
     if path not in features:
       features[path] = pipeline.features_anywhere(read(path), FLAGS.keypoints, descriptor,
-                                                  model, FLAGS.seed, FLAGS.fpfh_max_nn)
+                                                  model, FLAGS.seed, FLAGS.fpfh_max_nn, voxel=0)
       if features[path].note:
-        tqdm.tqdm.write(f'{os.path.basename(path)}: {features[path].note}')
+        say(f'{os.path.basename(path)}: {features[path].note}')
     return features[path]
 
   def fallback_features(path):
     return pipeline.features_anywhere(read(path), 'auto', descriptor, model, FLAGS.seed,
-                                      FLAGS.fpfh_max_nn)
+                                      FLAGS.fpfh_max_nn, voxel=0)
 
   transforms = []
   with open(os.path.join(FLAGS.out, 'registrations.csv'), 'w', newline='') as f:
@@ -153,20 +199,24 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
     writer.writerow(['cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials',
                      'seconds', *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)],
                      'rte', 'rre', 'success', 'error'])
-    for cloud1, cloud2 in tqdm.tqdm(pairs, desc='registration', unit='pair'):
+    for cloud1, cloud2 in tqdm.tqdm(pairs, desc='registration', unit='pair',
+                                    disable=not _show_progress()):
       start = time.perf_counter()
       try:
         f1, f2 = features_of(cloud1), features_of(cloud2)
+        k = max(FLAGS.verify, 1)
         try:
-          reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac)
+          reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac, candidates=k)
         except ValueError as e:
           if FLAGS.keypoints != 'iss':
             raise
           # As pipeline.register: keypoints spread over both clouds, this pair only.
           f1, f2 = (fallback_features(c) for c in (cloud1, cloud2))
-          tqdm.tqdm.write(f'{os.path.basename(cloud1)} / {os.path.basename(cloud2)}: {e}; '
-                          'registered again with farthest-point keypoints')
-          reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac)
+          say(f'{os.path.basename(cloud1)} / {os.path.basename(cloud2)}: {e}; '
+              'registered again with farthest-point keypoints')
+          reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac, candidates=k)
+        if FLAGS.verify > 0:
+          reg = pipeline.verify(reg, f1, f2, read(cloud1), read(cloud2))
         t, inliers, trials, error = reg.transform, int(reg.inliers.sum()), reg.trials, ''
         keypoints = (len(f1.xyz), len(f2.xyz))
       except (io.CloudFileError, clean.CloudDataError):
@@ -217,6 +267,8 @@ def main(argv):
                 or len(FLAGS.descriptor) != 1):
     raise SystemExit('error: batch mode takes one of --pairs / --sequence, --out and one '
                      '--descriptor (not --cloud1/--cloud2/--json/--plot/--icp)')
+  if FLAGS.verify < 0:
+    raise SystemExit(f'error: --verify must be >= 0 (0: no verification), got {FLAGS.verify}')
   if not batch and not (FLAGS.cloud1 and FLAGS.cloud2):
     raise SystemExit('error: give --cloud1 and --cloud2 (or --pairs / --sequence with --out)')
   needs_model = 'learned' in FLAGS.descriptor or FLAGS.keypoints == 'learned'
@@ -230,39 +282,65 @@ def main(argv):
     except (io.CloudFileError, clean.CloudDataError, FileNotFoundError, ValueError) as e:
       raise SystemExit(f'error: {e}') from None
     return
+  # Reading each cloud onto the grid, then per descriptor the keypoints and descriptors of
+  # both clouds and RANSAC (and ICP): one step of the bar each.
+  stages = 2 + len(FLAGS.descriptor) * (5 + (FLAGS.verify > 0) + FLAGS.icp)
+  bar = tqdm.tqdm(total=stages, unit='stage', leave=False, disable=not _show_progress(),
+                  bar_format='register {n}/{total} [{elapsed}] {desc}')
+
+  def stage(name):
+    bar.set_description_str(name, refresh=False)
+    bar.update(1)
+
   try:
     for out_path in (FLAGS.json, FLAGS.plot):
       _check_writable(out_path)
+    model = _load_model(checkpoint) if needs_model else None
+    voxel = _voxel(model)
     # float64 until register() has centred the pair: UTM-scale clouds keep their precision.
-    clouds = [clean.clean_cloud(io.read_cloud(p, FLAGS.format), p, np.float64)
-              for p in (FLAGS.cloud1, FLAGS.cloud2)]
+    clouds, read_seconds = [], {}
+    for n, path in enumerate((FLAGS.cloud1, FLAGS.cloud2), 1):
+      stage(f'reading {os.path.basename(path)}')
+      seconds = {}
+      clouds.append(_read_on_grid(path, voxel, lambda line: print(line) if bar.disable
+                                  else bar.write(line), seconds))
+      read_seconds.update({f'cloud{n}_{k}': v for k, v in seconds.items()})
     t_gt = _ground_truth(FLAGS.groundtruth, FLAGS.cloud1, FLAGS.cloud2) if FLAGS.groundtruth else None
-    model = None
-    if needs_model:
-      model = _load_model(checkpoint)
   except (io.CloudFileError, clean.CloudDataError, FileNotFoundError, ValueError) as e:
+    bar.close()
     raise SystemExit(f'error: {e}') from None
   results = []
   for descriptor in FLAGS.descriptor:
     try:
       start = time.perf_counter()
-      reg, f1, f2 = pipeline.register(clouds[0], clouds[1], FLAGS.keypoints, descriptor, model,
-                                      FLAGS.seed, FLAGS.fpfh_max_nn, icp=FLAGS.icp,
-                                      estimator=FLAGS.ransac)
+      reg, f1, f2 = pipeline.register(
+          clouds[0], clouds[1], FLAGS.keypoints, descriptor, model, FLAGS.seed,
+          FLAGS.fpfh_max_nn, icp=FLAGS.icp, estimator=FLAGS.ransac, voxel=0,
+          verify_candidates=FLAGS.verify,
+          progress=lambda name: stage(f'{descriptor}: {name}') if 'grid' not in name else None)
     except ValueError as e:
+      bar.close()
       raise SystemExit(f'error: {e}') from None
+    if descriptor == FLAGS.descriptor[-1]:
+      bar.close()
+    else:
+      bar.clear()   # redrawn at its next stage, below this descriptor's report
     transform = reg.transform
     out = {'keypoints': FLAGS.keypoints, 'descriptor': descriptor,
            'num_keypoints': [len(f1.xyz), len(f2.xyz)], 'inliers': int(reg.inliers.sum()),
            'trials': reg.trials, 'model': checkpoint if descriptor == 'learned' else None,
            'notes': reg.notes, 'fitness': reg.fitness, 'inlier_rmse': reg.inlier_rmse,
+           'voxel': voxel, 'points': [len(clouds[0]), len(clouds[1])],
            'correspondence_set_size': reg.correspondence_set_size,
            'draws': model.draws if descriptor == 'learned' else None,
            'seconds': {**{f'cloud1_{k}': v for k, v in f1.seconds.items()},
-                       **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds}}
+                       **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds,
+                       **read_seconds}}
+    if reg.verified_fitness is not None:
+      out['verified_fitness'] = reg.verified_fitness.tolist()
     if FLAGS.icp:
       out['icp_fitness'] = reg.icp_fitness
-    out['seconds']['total'] = time.perf_counter() - start
+    out['seconds']['total'] = time.perf_counter() - start + sum(read_seconds.values())
     out['T_12'] = transform.tolist()
     out['overlap_fitness'] = pipeline.overlap_fitness(clouds[0], clouds[1], transform)
     if t_gt is not None:

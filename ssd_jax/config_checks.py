@@ -9,7 +9,7 @@ import json
 import jax
 import ml_collections
 
-from ssd_jax import augment, grouping, network, objective
+from ssd_jax import augment, grouping, network, objective, sensors
 from ssd_jax.data import datasets
 
 AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
@@ -68,6 +68,17 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
             f'model.{field} must be (low, high) degrees with 0 < low <= high, got {span}')
   require(m.branch_fov[1] <= 360, f'model.branch_fov must be within 360 degrees, got '
           f'{tuple(m.branch_fov)}')
+  if d.get('rescan_rate', 0.0) > 0:
+    require(d.rescan_rate <= 1, f'data.rescan_rate must be in [0, 1], got {d.rescan_rate}')
+    bad = set(d.rescan_sensors) - set(sensors.SENSORS)
+    require(d.rescan_sensors and not bad, f'data.rescan_sensors: unknown {sorted(bad)} (or '
+            f'none given); choose from {tuple(sensors.SENSORS)}')
+    span = tuple(d.rescan_shift)
+    require(len(span) == 2 and 0 <= span[0] <= span[1],
+            f'data.rescan_shift must be (low, high) metres with 0 <= low <= high, got {span}')
+    require(d.rescan_views >= 1, f'data.rescan_views must be >= 1, got {d.rescan_views}')
+    require(config.objective == 'self_supervised',
+            f'data.rescan_rate is for the self-supervised objective, not {config.objective!r}')
   require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
   require(d.num_points >= m.num_clusters,
           f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '
@@ -77,6 +88,8 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'got {config.inference.num_samples}')
   require(config.inference.draws >= 1,
           f'inference.draws must be >= 1, got {config.inference.draws}')
+  require(config.inference.get('voxel_size', 0.2) >= 0,
+          f'inference.voxel_size must be >= 0 metres, got {config.inference.get("voxel_size")}')
   require(t.batch_size >= 1, f'train.batch_size must be >= 1, got {t.batch_size}')
   require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
   require(t.get('lr_schedule', 'constant') in LR_SCHEDULES,   # runs from before it: constant

@@ -54,6 +54,8 @@ class Model:
       ball (1: one sampling, as in training). A cluster holds c points drawn from the
       hundreds of points a ball holds in a 0.2 m-voxel scan, so one draw carries
       sampling noise that averaging removes, at `draws` times the network cost.
+    voxel_size: the voxel grid (metres) of its training clouds, on which
+      `registration.pipeline` puts every cloud before describing it.
   """
   net: network.FeatureNet
   variables: Any
@@ -61,6 +63,7 @@ class Model:
   num_samples: int = 64
   step: int | None = None     # training step of a loaded checkpoint
   draws: int = 1
+  voxel_size: float = 0.2     # metres: the grid of the clouds it was trained on
 
   @classmethod
   def from_config(cls, config: ml_collections.ConfigDict, variables) -> 'Model':
@@ -69,7 +72,8 @@ class Model:
     settings = config.get('inference') or {}
     num_samples = int(settings.get('num_samples', 0)) or int(config.model.num_samples)
     return cls(network.create(config.model), variables, float(config.model.radius),
-               num_samples, draws=int(settings.get('draws', 1)))
+               num_samples, draws=int(settings.get('draws', 1)),
+               voxel_size=float(settings.get('voxel_size', 0.2)))
 
 
 def checkpoint_directory(run_dir: str | os.PathLike) -> str:

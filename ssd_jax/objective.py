@@ -90,8 +90,10 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
     model: a `FeatureNet`.
     variables: {'params', 'batch_stats'}.
     key: PRNG key for rotation, jitter and center sampling.
-    points: [B, N, 3] metres, each cloud centred on its sensor.
-    valid: [B, N] bool mask of real points.
+    points: [B, N, 3] metres, each cloud centred on its sensor; or [B, 2, N, 3], each
+      cloud beside a second view of it in its own frame (`datasets.RescanPairDataset`),
+      which the second branch turns instead of the cloud itself.
+    valid: [B, N] (or [B, 2, N]) bool mask of real points.
     cfg: the `model` section of the config.
     train: BatchNorm in training mode (batch statistics, updated running stats).
 
@@ -102,13 +104,18 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
   # Folded in, not split off, so the paper's setting draws what it drew before.
   k_res1, k_res2 = jax.random.split(jax.random.fold_in(key, 1))
   b = points.shape[0]
-  pc2, r_gt = augment.self_rotate(k_rot, points, cfg.rotation_sigma, cfg.rotation_clip,
+  if points.ndim == 4:
+    view1, view2, seen1, seen2 = points[:, 0], points[:, 1], valid[:, 0], valid[:, 1]
+  else:
+    view1 = view2 = points
+    seen1 = seen2 = valid
+  pc2, r_gt = augment.self_rotate(k_rot, view2, cfg.rotation_sigma, cfg.rotation_clip,
                                   cfg.get('self_rotation', 'gaussian'))
-  pc1 = augment.jitter(k_jit1, points, cfg.jitter_sigma, cfg.jitter_clip)
+  pc1 = augment.jitter(k_jit1, view1, cfg.jitter_sigma, cfg.jitter_clip)
   pc2 = augment.jitter(k_jit2, pc2, cfg.jitter_sigma, cfg.jitter_clip)
   # Each branch may see its own subset of the points (the paper: both see all).
-  valid1 = resample_branch(k_res1, points, valid, cfg)
-  valid2 = resample_branch(k_res2, points, valid, cfg)
+  valid1 = resample_branch(k_res1, view1, seen1, cfg)
+  valid2 = resample_branch(k_res2, view2, seen2, cfg)
   both = jnp.concatenate([pc1, pc2], 0)
   both_valid = jnp.concatenate([valid1, valid2], 0)
 

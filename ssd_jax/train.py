@@ -285,6 +285,12 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
                      min_points=config.data.min_points)
   if config.objective == 'triplet':
     dataset = triplet_dataset(config)
+  elif config.data.get('rescan_rate', 0.0) > 0:
+    d = config.data
+    dataset = datasets.RescanPairDataset.from_source(
+        d.path, rate=d.rescan_rate, sensors=tuple(d.rescan_sensors),
+        min_shift=d.rescan_shift[0], max_shift=d.rescan_shift[1], views_per_cloud=d.rescan_views,
+        seed=config.seed, **data_kwargs)
   else:
     dataset = datasets.CloudDataset.from_source(config.data.path, **data_kwargs)
   eval_points = None

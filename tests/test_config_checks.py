@@ -35,6 +35,24 @@ def test_config_errors_name_the_value(tiny_config):
       config_checks.check_config(config)
 
 
+def test_rescan_pair_errors_name_the_value(tiny_config):
+  tiny_config.data.rescan_rate = 0.5
+  config_checks.check_config(tiny_config)
+  cases = [('rescan_rate', 2.0, r'data.rescan_rate must be in \[0, 1\]'),
+           ('rescan_sensors', ('vlp16', 'hdl128'), r"rescan_sensors: unknown \['hdl128'\]"),
+           ('rescan_sensors', (), 'rescan_sensors: unknown'),
+           ('rescan_shift', (10.0, 5.0), 'rescan_shift must be'),
+           ('rescan_views', 0, 'rescan_views must be >= 1')]
+  for name, value, message in cases:
+    config = tiny_config.copy_and_resolve_references()
+    config.data[name] = value
+    with pytest.raises(config_checks.ConfigError, match=message):
+      config_checks.check_config(config)
+  tiny_config.objective = 'triplet'
+  with pytest.raises(config_checks.ConfigError, match='for the self-supervised objective'):
+    config_checks.check_config(tiny_config)
+
+
 def test_batch_must_split_over_devices(tiny_config):
   tiny_config.train.batch_size = 3
   with pytest.raises(config_checks.ConfigError, match=r'batch_size \(3\) must be divisible by the 2 devices of the run'):

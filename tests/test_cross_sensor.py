@@ -13,7 +13,7 @@ from ssd_jax import sensors
 from ssd_jax.configs import cross_sensor as cross_sensor_eval
 from ssd_jax.configs import cross_sensor_data
 from ssd_jax.data import benchmarks, io, rescan
-from ssd_jax.evaluation import evaluators
+from ssd_jax.evaluation import evaluators, feature_store
 from ssd_jax.synthetic import cross_sensor, dataset
 from tests.conftest import shared_path, tiny_synthetic_config
 
@@ -114,10 +114,11 @@ def test_cross_sensor_evaluation_writes_the_matrix(tiny_set, tmp_path):
   del config.evals['real']
   config.evals.synthetic.dataset = 'synthetic'
   config.evals.synthetic.distance_bins = ((5.0, 10.0), (10.0, 20.0))
-  config.evals.synthetic.rows = ('iss+fpfh', 'auto+fpfh+upright', 'open3d')
+  config.evals.synthetic.rows = ('iss+fpfh', 'auto+fpfh+upright+verify', 'open3d')
   _, text = evaluators.evaluate(config, tmp_path, log=lambda s: None)
   assert '| method | all | vlp16 | front120 | 5-10 m | 10-20 m |' in text
-  assert 'Open3D ISS + FPFH (paper searches)' in text and 'upright RANSAC' in text
+  assert 'Open3D ISS + FPFH (paper searches)' in text
+  assert 'farthest-point kpt + FPFH desc, upright RANSAC, verified' in text
   with open(tmp_path / 'synthetic.csv') as f:
     rows = list(csv.DictReader(f))
   # 3 methods x (2 units + all) x (2 bins + all) cells, each with its pair count.
@@ -145,3 +146,14 @@ def test_make_real_pairs_names_a_bad_unit(tmp_path):
                        timeout=120)
   assert run.returncode == 1 and run.stderr.strip().splitlines()[-1] == (
       "error: --sensor: unknown sensor 'vlp32'; known: vlp16, hdl32, hdl64, vls128, front120")
+
+
+def test_row_names_parse_into_keypoints_descriptor_estimator_and_verification():
+  assert feature_store.split_row('auto+ours+upright+verify') == ('auto', 'ours')
+  assert feature_store.row_estimator('auto+ours+upright+verify') == 'upright'
+  assert feature_store.row_verifies('auto+ours+upright+verify')
+  assert not feature_store.row_verifies('iss+fpfh') and feature_store.row_estimator('iss+fpfh') == 'rigid'
+  assert feature_store.row_label('auto+fpfh+rigid+verify') == 'farthest-point kpt + FPFH desc, verified'
+  for bad in ('iss', 'iss+fpfh+affine', 'iss+fpfh+upright+check', 'iss++upright'):
+    with pytest.raises(ValueError, match='must be "keypoints\\+descriptor\\[\\+estimator'):
+      feature_store.split_row(bad)

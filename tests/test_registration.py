@@ -1,5 +1,7 @@
 """Ground-truth files, RANSAC and registration metrics."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy import spatial
@@ -190,7 +192,7 @@ def test_pipeline_refuses_bad_clouds_with_one_line():
   for bad, message in ((with_nan, '1 points have NaN/Inf'), (np.zeros((0, 3)), 'empty'),
                        (pts[:, :2], r'shape \[N, 3\]'),
                        (pts + 5.4e6, 'float32 resolves only 0.5 m; subtract an offset'),
-                       (pts[:5] * 0.01, r'iss keypoints: found a cloud of 5 points, 64')):
+                       (pts[:5], r'iss keypoints: found a cloud of 5 points, 64')):
     with pytest.raises(ValueError, match=message):
       pipeline.cloud_features(bad, fpfh_max_nn=50)
   for idx in (np.array([0, 500]), np.array([[1, 2]]), np.array([0.5])):
@@ -302,3 +304,61 @@ def test_fpfh_keeps_its_4m_ball_on_a_dense_cloud_and_is_unchanged_on_a_voxelised
   gridded, capped = features.fpfh(dense, kp), features.fpfh(dense, kp, search_voxel=0.0)
   dist = lambda a: np.linalg.norm(a - ref, axis=1).mean()
   assert dist(gridded) < 0.7 * dist(capped)
+
+
+def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root):
+  """A pair densified 12x (3 cm jitter, ~250 k points per cloud) is put on the 0.2 m grid
+  and registers to the transform of the pair as given (5 cm, 0.2 degrees); voxel=0
+  keeps every point; a cloud already on the grid is used as given."""
+  pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
+  c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
+  rng = np.random.default_rng(0)
+  dense = [np.repeat(c, 12, axis=0) + rng.normal(0, 0.03, (12 * len(c), 3)) for c in (c1, c2)]
+  reg, f1, f2 = pipeline.register(c1, c2, 'auto', 'fpfh', estimator='upright', icp=True)
+  assert 'used as given' in f1.grid and 'used as given' in f2.grid
+  reg_d, g1, g2 = pipeline.register(*dense, 'auto', 'fpfh', estimator='upright', icp=True)
+  assert g1.grid == f'{len(dense[0]):,} -> {g1.grid.split()[2]} points on the 0.2 m grid'
+  assert int(g1.grid.split()[2].replace(",", "")) < 2 * len(c1)   # vs 12x as given
+  assert metrics.registration_errors(pair.transform, reg.transform)['success']
+  diff = geometry.invert_transform(reg.transform) @ reg_d.transform
+  assert np.linalg.norm(diff[:3, 3]) < 0.05
+  assert geometry.geodesic_angle_deg(diff[:3, :3], np.eye(3)) < 0.2
+  grid, note = pipeline.to_grid(dense[0], 0.0)
+  assert grid is dense[0] and note == ''
+
+
+def test_verification_picks_the_pose_the_clouds_agree_with_among_ransacs_runners_up():
+  """Correspondences of a street that repeats every 12 m: RANSAC's best pose is one period
+  off (the decoy matches outnumber the true ones), the true pose is a runner-up; the
+  check against the clouds picks it and ICP makes it exact."""
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
+  cloud1 = scan[np.linalg.norm(scan[:, :2], axis=1) < 30]
+  t_true = geometry.make_transform(geometry.rotation_z(np.radians(40.0)), np.array([3.0, 1.0, 0.0]))
+  cloud2 = (cloud1 - t_true[:3, 3]) @ t_true[:3, :3]      # T_12 maps cloud 2 onto cloud 1
+  rng = np.random.default_rng(0)
+  idx = rng.choice(len(cloud1), 300, replace=False)
+  xyz2 = cloud2[idx]
+  xyz1 = cloud1[idx].copy()
+  xyz1[:180] += np.array([12.0, 0.0, 0.0])               # the decoy: one period along x
+  xyz1[240:] = rng.uniform(-30, 30, (60, 3))             # and plain outliers
+  samples = ransac.draw_upright_samples(np.random.default_rng(1), xyz2, 10_001)
+  res = ransac.ransac_upright(xyz1, xyz2, samples, candidates=5)
+  assert res.candidates.shape[1:] == (4, 4) and 2 <= len(res.candidates) <= 5
+  np.testing.assert_array_equal(res.candidates[0], res.transform)
+  assert not metrics.registration_errors(t_true, res.transform)['success']   # the decoy
+  f1 = pipeline.CloudFeatures(xyz1, np.eye(300), {})
+  f2 = pipeline.CloudFeatures(xyz2, np.eye(300), {})
+  estimated = pipeline.estimate(f1, f2, estimator='upright', candidates=5)
+  assert len(estimated.candidates) <= 5
+  np.testing.assert_array_equal(estimated.candidates[0], estimated.transform)
+  reg = dataclasses.replace(estimated, transform=res.transform, inliers=res.inliers,
+                            candidates=res.candidates)
+  verified = pipeline.verify(reg, f1, f2, cloud1, cloud2)
+  err = metrics.registration_errors(t_true, verified.transform)
+  assert err['rte'] < 0.05 and err['rre_geodesic'] < 0.2, err
+  assert verified.verified_fitness.max() > 0.9 > verified.verified_fitness[0]
+  assert verified.inliers.sum() < reg.inliers.sum()    # recounted: the true matches only
+  # Hypotheses within 2 m and 5 degrees of a better one are not candidates of their own.
+  near = np.stack([res.transform, res.transform @ geometry.make_transform(np.eye(3),
+                                                                          np.array([1.0, 0, 0]))])
+  assert ransac.distinct_best(near, np.array([5, 4]), 2) == [0]

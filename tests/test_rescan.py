@@ -8,7 +8,7 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import geometry
-from ssd_jax.data import benchmarks, io, rescan
+from ssd_jax.data import benchmarks, datasets, io, rescan
 from ssd_jax.evaluation import learning_curve
 from tests.conftest import shared_path
 
@@ -74,3 +74,38 @@ def test_make_real_pairs_command_submaps_and_bad_flags(tmp_path):
   out = run('--max_range=0', f'--out={tmp_path / "y"}')
   assert out.returncode == 1 and '--max_range must be > 0' in out.stderr
   assert 'Traceback' not in out.stderr
+
+
+def test_rescan_view_is_another_unit_in_the_scans_own_frame():
+  points = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin'))
+  cfg = rescan.RescanConfig(min_shift=5.0, max_shift=10.0, sensor='vlp16', min_points=500,
+                            toward_points=True)
+  view = rescan.rescan_view(np.random.default_rng(0), points, cfg)
+  again = rescan.rescan_view(np.random.default_rng(0), points, cfg)
+  np.testing.assert_array_equal(view, again)
+  assert view.dtype == np.float32 and 500 <= len(view) < 0.5 * len(points)
+  # No transform: the view lies on the scan's surfaces where it stands ...
+  dist, _ = spatial.cKDTree(points).query(view)
+  assert np.median(dist) < 0.15
+  # ... and a 16-beam unit 5-10 m away sees other rings: the scan's nearest-neighbour
+  # structure is not kept (fewer points per ring, the scan's own rings elsewhere).
+  own = np.median(spatial.cKDTree(points).query(points, k=2)[0][:, 1])
+  assert np.median(spatial.cKDTree(view).query(view, k=2)[0][:, 1]) > own
+
+
+def test_rescan_pair_dataset_pairs_a_cloud_with_its_rescan_or_itself(tmp_path):
+  source = shared_path('kitti_object_velodyne', '000000.bin')
+  kwargs = dict(sensors=('vlp16', 'hdl32'), min_shift=5.0, max_shift=10.0, views_per_cloud=2,
+                crop_radius=20.0)
+  always = datasets.RescanPairDataset([source], rate=1.0, **kwargs)
+  never = datasets.RescanPairDataset([source], rate=0.0, **kwargs)
+  b = always.batch(0, 0, 2, 1024)
+  assert b.shape == (2, 2, 1024, 3) and b.dtype == np.float32
+  np.testing.assert_array_equal(b, always.batch(0, 0, 2, 1024))     # a function of the step
+  assert not np.array_equal(b[0, 0], b[0, 1])
+  assert np.linalg.norm(b[:, 1], axis=-1).max() <= 20.0             # the same disk
+  dist, _ = spatial.cKDTree(always.clouds.cloud(0)).query(b[0, 1])
+  assert np.median(dist) < 0.15                                      # in the cloud's frame
+  c = never.batch(0, 0, 2, 1024)
+  np.testing.assert_array_equal(c[:, 0], c[:, 1])                   # the paper's pair
+  np.testing.assert_array_equal(c[:, 0], b[:, 0])

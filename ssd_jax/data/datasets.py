@@ -17,8 +17,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from ssd_jax.data import clean, io
-from ssd_jax.data import kitti
+from ssd_jax.data import clean, io, kitti, rescan
 
 
 def crop(points: np.ndarray, radius: float) -> np.ndarray:
@@ -110,6 +109,76 @@ class CloudDataset:
                          self.cloud(epoch_member(seed, step * batch_size + slot, len(self))),
                          num_points)
     return out
+
+
+class RescanPairDataset:
+  """Each training cloud beside a second view of the same place, for the self-supervised
+  objective: with chance `rate` per row, a re-scan of the cloud by a virtual unit of
+  `sensors` standing `min_shift`-`max_shift` m away (`rescan.rescan_view`: its own
+  standpoint, occlusion, beam pattern and voxel grid, in the cloud's frame, cropped to the
+  same disk); otherwise the same subsample again (the paper's pair: a cloud and its
+  turned copy). No pose or label is read: the view is made from the one cloud.
+
+  Each cloud has `views_per_cloud` re-scans, view k of cloud i drawn from
+  (seed, i, k) and cached, so a view costs its ~0.1 s once and every batch is still a
+  pure function of (seed, step).
+  """
+
+  def __init__(self, files: Sequence[os.PathLike], rate: float, sensors: Sequence[str],
+               min_shift: float, max_shift: float, views_per_cloud: int = 8, seed: int = 0,
+               fmt: str = 'auto', crop_radius: float = 20.0, min_points: int = 1,
+               cache_size: int = 4096):
+    self.whole = CloudDataset(files, fmt=fmt, crop_radius=0.0, min_points=min_points)
+    self.clouds = CloudDataset(files, fmt=fmt, crop_radius=crop_radius, min_points=min_points)
+    self.rate, self.sensors, self.views_per_cloud = rate, tuple(sensors), views_per_cloud
+    self.shift, self.seed, self.crop_radius = (min_shift, max_shift), seed, crop_radius
+    self._view = functools.lru_cache(maxsize=cache_size)(self._view_uncached)
+
+  @classmethod
+  def from_source(cls, source: str | os.PathLike, **kwargs) -> 'RescanPairDataset':
+    return cls(io.list_clouds(source), **kwargs)
+
+  def __len__(self) -> int:
+    return len(self.clouds)
+
+  def _view_uncached(self, i: int, k: int) -> np.ndarray:
+    rng = np.random.default_rng((self.seed, 7, i, k))
+    cfg = rescan.RescanConfig(min_shift=self.shift[0], max_shift=self.shift[1],
+                              sensor=str(rng.choice(self.sensors)), toward_points=True,
+                              min_points=RESCAN_MIN_POINTS, noise_sigma=0.0)
+    try:
+      view = crop(rescan.rescan_view(rng, self.whole.cloud(i), cfg), self.crop_radius)
+    except ValueError:
+      view = np.zeros((0, 3), np.float32)
+    # A view that sees too little of the disk is no pair: the cloud is its own second view.
+    return view if len(view) >= RESCAN_MIN_POINTS else self.clouds.cloud(i)
+
+  def view(self, i: int, k: int) -> np.ndarray:
+    """Re-scan k of cloud i: [M, 3] float32 metres in cloud i's frame (the cropped cloud
+    itself where no standpoint sees `RESCAN_MIN_POINTS` of it)."""
+    return self._view(i, k)
+
+  def batch(self, seed: int, step: int, batch_size: int, num_points: int,
+            rows: Sequence[int] | None = None) -> np.ndarray:
+    """Rows `rows` (default all) of the batch of `step`: [len(rows), 2, num_points, 3]
+    float32 (the cloud, its second view). Clouds are visited as `CloudDataset.batch`
+    visits them; row r draws from its own stream (seed, step, r, 2)."""
+    rows = range(batch_size) if rows is None else rows
+    out = np.empty((len(rows), 2, num_points, 3), np.float32)
+    for k, slot in enumerate(rows):
+      rng = np.random.default_rng((seed, step, slot, 2))
+      i = epoch_member(seed, step * batch_size + slot, len(self))
+      out[k, 0] = subsample(rng, self.clouds.cloud(i), num_points)
+      if rng.uniform() < self.rate:
+        out[k, 1] = subsample(rng, self.view(i, int(rng.integers(self.views_per_cloud))),
+                              num_points)
+      else:
+        out[k, 1] = out[k, 0]
+    return out
+
+
+# Fewer points than this of a re-scan within the crop make it no second view.
+RESCAN_MIN_POINTS = 500
 
 
 TRIPLET_AXES = ('scene', 'stored')

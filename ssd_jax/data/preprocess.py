@@ -13,12 +13,13 @@ def _o3d_cloud(points: np.ndarray):
   return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
 
 
-def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
-  """Centroid of the points in each occupied voxel. [N, 3] -> [M, 3] float32 metres."""
+def voxel_downsample(points: np.ndarray, voxel_size: float, dtype=np.float32) -> np.ndarray:
+  """Centroid of the points in each occupied voxel (computed in float64). [N, 3] -> [M, 3]
+  `dtype` metres."""
   if voxel_size <= 0:
-    return np.asarray(points, np.float32)
+    return np.asarray(points, dtype)
   down = _o3d_cloud(points).voxel_down_sample(voxel_size)
-  return np.asarray(down.points, np.float32)
+  return np.asarray(down.points, dtype)
 
 
 def process_scan(points: np.ndarray, voxel_size: float = 0.2,

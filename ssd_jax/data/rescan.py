@@ -79,11 +79,10 @@ def _view(rng: np.random.Generator, points: np.ndarray, cfg: RescanConfig) -> np
   return points + rng.normal(0.0, cfg.noise_sigma, points.shape)
 
 
-def rescan_pair(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
-                cfg: RescanConfig = RescanConfig()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-  """(cloud1 [N1, 3], cloud2 [N2, 3], T_12 [4, 4]) from one scan points [N, 3] metres
-  centred on its sensor (or a submap centred on its origin, with cfg.occlusion False);
-  the virtual sensor is turned by `yaw_deg` about z."""
+def _virtual_scan(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
+                  cfg: RescanConfig) -> tuple[np.ndarray, np.ndarray]:
+  """(what a virtual sensor min_shift-max_shift m away, turned by `yaw_deg` about z, sees
+  of points [N, 3]: [M, 3] in its own frame; its pose T_12 [4, 4] in the points' frame)."""
   for _ in range(20):
     r = rng.uniform(cfg.min_shift, cfg.max_shift)
     if cfg.toward_points:
@@ -100,14 +99,30 @@ def rescan_pair(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
       local = local[sensors.resample(local, sensors.get(cfg.sensor))]
     cloud2 = _view(rng, local, cfg)
     if len(cloud2) >= cfg.min_points:
-      break
-  else:
-    raise ValueError(f'no virtual sensor within {cfg.max_shift} m sees {cfg.min_points} points '
-                     'of this scan')
-  cloud1 = _view(rng, points, cfg)
-  transform = np.eye(4)
-  transform[:3, :3], transform[:3, 3] = rot, shift
-  return cloud1, cloud2, transform
+      transform = np.eye(4)
+      transform[:3, :3], transform[:3, 3] = rot, shift
+      return cloud2, transform
+  raise ValueError(f'no virtual sensor within {cfg.max_shift} m sees {cfg.min_points} points '
+                   'of this scan')
+
+
+def rescan_pair(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
+                cfg: RescanConfig = RescanConfig()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+  """(cloud1 [N1, 3], cloud2 [N2, 3], T_12 [4, 4]) from one scan points [N, 3] metres
+  centred on its sensor (or a submap centred on its origin, with cfg.occlusion False);
+  the virtual sensor is turned by `yaw_deg` about z."""
+  cloud2, transform = _virtual_scan(rng, points, yaw_deg, cfg)
+  return _view(rng, points, cfg), cloud2, transform
+
+
+def rescan_view(rng: np.random.Generator, points: np.ndarray,
+                cfg: RescanConfig = RescanConfig()) -> np.ndarray:
+  """What a virtual sensor (cfg: unit, distance) sees of one scan points [N, 3] metres,
+  as float32 [M, 3] in the scan's own frame: the second view of a label-free training
+  pair, which differs from the scan in standpoint, occlusion, beam pattern and sampling,
+  not in pose (the objective draws the turn)."""
+  cloud2, transform = _virtual_scan(rng, points, rng.uniform(-180.0, 180.0), cfg)
+  return (cloud2 @ transform[:3, :3].T + transform[:3, 3]).astype(np.float32)
 
 
 def _write_view(path: Path, cloud: np.ndarray) -> None:

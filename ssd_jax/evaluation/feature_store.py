@@ -30,26 +30,48 @@ NAMES = {'iss': 'ISS', 'random': 'random', 'auto': 'farthest-point', 'fpfh': 'FP
          'ours_run': 'Ours (this run)'}
 
 
-def split_row(row: str) -> tuple[str, str]:
-  """'iss+fpfh' (or 'iss+fpfh+upright') -> ('iss', 'fpfh'), or a clear error."""
+# A row's last part 'verify': RANSAC's distinct best poses checked against the clouds
+# (`pipeline.verify`), this many.
+VERIFY_CANDIDATES = 10
+
+
+def _parts(row: str) -> tuple[list[str], str, bool]:
+  """-> ([keypoints, descriptor], estimator, verify), or a clear error."""
   parts = row.split('+')
+  verify = len(parts) == 4 and parts[3] == 'verify'
+  if verify:
+    parts = parts[:3]
+  estimator = 'rigid'
   if len(parts) == 3 and parts[2] in pipeline.ESTIMATORS:
-    parts = parts[:2]
+    parts, estimator = parts[:2], parts[2]
   if len(parts) != 2 or not all(parts):
-    raise ValueError(f'row {row!r} must be "keypoints+descriptor[+estimator]", e.g. iss+fpfh '
-                     f'or auto+ours+upright (estimators: {", ".join(pipeline.ESTIMATORS)})')
-  return parts[0], parts[1]
+    raise ValueError(f'row {row!r} must be "keypoints+descriptor[+estimator[+verify]]", e.g. '
+                     f'iss+fpfh or auto+ours+upright+verify (estimators: '
+                     f'{", ".join(pipeline.ESTIMATORS)})')
+  return parts, estimator, verify
+
+
+def split_row(row: str) -> tuple[str, str]:
+  """'iss+fpfh' (or 'iss+fpfh+upright', 'auto+fpfh+upright+verify') -> ('iss', 'fpfh')."""
+  (kp, desc), _, _ = _parts(row)
+  return kp, desc
 
 
 def row_estimator(row: str) -> str:
   """The RANSAC model of a row: its third part, else 'rigid' (the paper's)."""
-  parts = row.split('+')
-  return parts[2] if len(parts) == 3 else 'rigid'
+  return _parts(row)[1]
+
+
+def row_verifies(row: str) -> bool:
+  """Whether a row checks RANSAC's best poses against the clouds (its last part 'verify')."""
+  return _parts(row)[2]
 
 
 def row_label(row: str) -> str:
   kp, desc = split_row(row)
   suffix = ', upright RANSAC' if row_estimator(row) == 'upright' else ''
+  if row_verifies(row):
+    suffix += ', verified'
   return f'{NAMES.get(kp, kp)} kpt + {NAMES.get(desc, desc)} desc{suffix}'
 
 

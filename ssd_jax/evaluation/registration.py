@@ -37,10 +37,15 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
       res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
       try:
         f1, f2 = store.features(pair.cloud1, row), store.features(pair.cloud2, row)
+        verify = feature_store.row_verifies(row)
         reg = pipeline.estimate(f1, f2, seed=seed * 1_000_003 + n,
                                 inlier_threshold=inlier_threshold, confidence=confidence,
                                 max_trials=max_trials,
-                                estimator=feature_store.row_estimator(row))
+                                estimator=feature_store.row_estimator(row),
+                                candidates=feature_store.VERIFY_CANDIDATES if verify else 1)
+        if verify:
+          reg = pipeline.verify(reg, f1, f2, store.cloud(pair.cloud1), store.cloud(pair.cloud2),
+                                inlier_threshold)
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named
       except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,

@@ -14,9 +14,10 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import inference
-from ssd_jax.data import clean
+from ssd_jax.data import clean, preprocess
 from ssd_jax.data.clean import check_cloud
 from ssd_jax.registration import features, keypoints as keypoints_lib, matching, ransac
+from ssd_jax.registration import verification
 
 KEYPOINTS = ('auto', 'iss', 'learned', 'random')
 DESCRIPTORS = ('fpfh', 'learned')
@@ -24,6 +25,15 @@ DESCRIPTORS = ('fpfh', 'learned')
 # 2-point samples of a turn about z and a translation, for scans whose z axis is up,
 # refit in 6 degrees of freedom (ransac.ransac_upright).
 ESTIMATORS = ('rigid', 'upright')
+# Metres: the voxel grid of every set the shipped models were trained and tested on
+# (3DFeat-Net's processing), and so the grid every cloud is put on before its features
+# (`to_grid`) unless the model says otherwise (`inference.Model.voxel_size`).
+VOXEL_SIZE = 0.2
+# A cloud that keeps at least this share of its points on the grid is on such a grid
+# already, used as given: re-gridding would only move its points by a fraction of a cell.
+# Clouds voxelised at 0.2 m on another grid keep 0.69-1.0 (every test set here), raw
+# 64-beam scans ~0.3, anything twice as dense as the grid under 0.3.
+ON_GRID = 0.6
 
 
 @dataclasses.dataclass
@@ -33,6 +43,7 @@ class CloudFeatures:
   descriptors: np.ndarray  # [K, D]
   seconds: dict
   note: str = ''           # the keypoint fallback used, if any (one line)
+  grid: str = ''           # what `to_grid` did (one line), if it ran
 
 
 @dataclasses.dataclass
@@ -49,6 +60,29 @@ class Registration:
   fitness: float = 0.0
   inlier_rmse: float = 0.0
   correspondence_set_size: int = 0
+  candidates: np.ndarray | None = None   # [k, 4, 4] RANSAC's distinct best poses (`verify`)
+  # After `verify`: the share of cloud 2 within verification.FIT_DISTANCE of cloud 1 under
+  # each candidate, ICP-refined; the transform is the best of them.
+  verified_fitness: np.ndarray | None = None
+
+
+def voxel_size_of(model=None) -> float:
+  """Metres: the grid `model`'s features expect (`VOXEL_SIZE` for FPFH or no model)."""
+  return float(getattr(model, 'voxel_size', VOXEL_SIZE)) if model is not None else VOXEL_SIZE
+
+
+def to_grid(points: np.ndarray, voxel: float) -> tuple[np.ndarray, str]:
+  """points [N, 3] metres on the `voxel` m grid the features were made for: the centroid
+  of each occupied cell (Open3D), in the input's coordinates and float type, so a dense
+  scan or a map tile costs what a 0.2 m-voxel scan does. -> (cloud [M, 3], one line
+  saying what was done: '' for voxel <= 0, which keeps every point)."""
+  if voxel <= 0:
+    return points, ''
+  down = preprocess.voxel_downsample(points, voxel, points.dtype)
+  if len(down) >= ON_GRID * len(points):
+    return points, (f'{len(points):,} points, no denser than the {voxel:g} m grid: used as '
+                    'given')
+  return down, f'{len(points):,} -> {len(down):,} points on the {voxel:g} m grid'
 
 
 def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0,
@@ -103,28 +137,50 @@ def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: st
 
 
 def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str = 'fpfh',
-                   model=None, seed: int = 0,
-                   fpfh_max_nn: int = features.FPFH_MAX_NN) -> CloudFeatures:
+                   model=None, seed: int = 0, fpfh_max_nn: int = features.FPFH_MAX_NN,
+                   voxel: float | None = None, progress=None) -> CloudFeatures:
   """Keypoints of points [N, 3] (finite metres, within float32's centimetre range of the
-  origin) and their descriptors. Raises ValueError on a malformed cloud or when the
+  origin) and their descriptors, computed on the cloud put on the `voxel` m grid
+  (`to_grid`; None: `voxel_size_of(model)`, 0: every point as given). Keypoints are
+  points of that grid, in the input's coordinates. `progress(stage)`, if given, is
+  called as each stage starts. Raises ValueError on a malformed cloud or when the
   detector finds fewer than 3 keypoints."""
   points = check_cloud(points)
   t0 = time.perf_counter()
+  points, grid = to_grid(points, voxel_size_of(model) if voxel is None else voxel)
+  t1 = time.perf_counter()
+  if progress is not None:
+    progress('keypoints')
   idx, note = compute_keypoints(points, keypoints, model, seed)
   if len(idx) < 3:
     raise ValueError(f'{keypoints} keypoints: found {len(idx)} in a cloud of {len(points)} '
                      'points, 3 are needed (too sparse, or planar / collinear?)')
-  t1 = time.perf_counter()
-  desc = compute_descriptors(points, idx, descriptor, model, fpfh_max_nn=fpfh_max_nn)
   t2 = time.perf_counter()
-  return CloudFeatures(points[idx], desc, {'keypoints': t1 - t0, 'descriptors': t2 - t1}, note)
+  if progress is not None:
+    progress('descriptors')
+  desc = compute_descriptors(points, idx, descriptor, model, fpfh_max_nn=fpfh_max_nn)
+  t3 = time.perf_counter()
+  return CloudFeatures(points[idx], desc,
+                       {'grid': t1 - t0, 'keypoints': t2 - t1, 'descriptors': t3 - t2}, note, grid)
+
+
+def _match_stats(xyz1: np.ndarray, xyz2: np.ndarray, transform: np.ndarray,
+                 inlier_threshold: float) -> tuple[np.ndarray, dict]:
+  """Over matches xyz1[i] <-> xyz2[i] under T_12: (which are within the threshold [C],
+  Open3D's RegistrationResult numbers)."""
+  residual = np.linalg.norm(xyz2 @ transform[:3, :3].T + transform[:3, 3] - xyz1, axis=1)
+  close = residual < inlier_threshold
+  rmse = float(np.sqrt(np.mean(residual[close] ** 2))) if close.any() else 0.0
+  return close, {'fitness': float(close.mean()), 'inlier_rmse': rmse,
+                 'correspondence_set_size': int(close.sum())}
 
 
 def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_threshold: float = 1.0,
              confidence: float = 0.99, max_trials: int = 10_000,
-             estimator: str = 'rigid') -> Registration:
+             estimator: str = 'rigid', candidates: int = 1) -> Registration:
   """Nearest-neighbour matches of cloud 1's keypoints among cloud 2's, then RANSAC with
-  the motion model `estimator` (`ESTIMATORS`)."""
+  the motion model `estimator` (`ESTIMATORS`); with `candidates` > 1 (upright only) the
+  result keeps that many distinct best poses for `verify`."""
   if estimator not in ESTIMATORS:
     raise ValueError(f'estimator must be one of {ESTIMATORS}, got {estimator!r}')
   if len(f1.xyz) < 3 or len(f2.xyz) < 3:
@@ -137,18 +193,32 @@ def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_thresho
   rng = np.random.default_rng(seed)
   if estimator == 'upright':
     samples = ransac.draw_upright_samples(rng, xyz2, max_trials + 1)
-    res = ransac.ransac_upright(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials)
+    res = ransac.ransac_upright(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials,
+                               candidates=candidates)
   else:
     samples = ransac.draw_minimal_samples(rng, xyz2, max_trials + 1)
     res = ransac.ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials)
   t2 = time.perf_counter()
-  residual = np.linalg.norm(xyz2 @ res.transform[:3, :3].T + res.transform[:3, 3] - xyz1, axis=1)
-  close = residual < inlier_threshold
-  rmse = float(np.sqrt(np.mean(residual[close] ** 2))) if close.any() else 0.0
   return Registration(res.transform, np.stack([np.arange(len(nn)), nn], 1), res.inliers,
                       res.trials, {'matching': t1 - t0, 'ransac': t2 - t1},
-                      fitness=float(close.mean()), inlier_rmse=rmse,
-                      correspondence_set_size=int(close.sum()))
+                      candidates=res.candidates,
+                      **_match_stats(xyz1, xyz2, res.transform, inlier_threshold)[1])
+
+
+def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1: np.ndarray,
+           points2: np.ndarray, inlier_threshold: float = 1.0) -> Registration:
+  """`reg` with the candidate pose (`estimate(candidates=k)`) that, refined by ICP, lays the
+  most of cloud 2 [N2, 3] on cloud 1 [N1, 3] (`verification.verify`; the clouds and the
+  features in the same coordinates, metres near the origin). Inliers and the
+  RegistrationResult numbers are recounted over the matches under it."""
+  t0 = time.perf_counter()
+  candidates = reg.candidates if reg.candidates is not None else reg.transform[None]
+  best, refined, fitness = verification.verify(points1, points2, candidates)
+  xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[reg.matches[:, 1]].astype(np.float64)
+  inliers, stats = _match_stats(xyz1, xyz2, refined[best], inlier_threshold)
+  return dataclasses.replace(reg, transform=refined[best], inliers=inliers,
+                             seconds={**reg.seconds, 'verify': time.perf_counter() - t0},
+                             verified_fitness=fitness, **stats)
 
 
 def local_origin(*clouds: np.ndarray) -> np.ndarray:
@@ -162,8 +232,8 @@ def local_origin(*clouds: np.ndarray) -> np.ndarray:
 
 
 def features_anywhere(points: np.ndarray, keypoints: str = 'iss', descriptor: str = 'fpfh',
-                      model=None, seed: int = 0,
-                      fpfh_max_nn: int = features.FPFH_MAX_NN) -> CloudFeatures:
+                      model=None, seed: int = 0, fpfh_max_nn: int = features.FPFH_MAX_NN,
+                      voxel: float | None = None, progress=None) -> CloudFeatures:
   """`cloud_features` of one cloud [N, 3] in any coordinates (float64 metres, e.g. UTM):
   computed around `local_origin(points)`, keypoints returned in the input coordinates
   as float64. Features of each cloud once, for registering many pairs (`estimate`
@@ -171,7 +241,7 @@ def features_anywhere(points: np.ndarray, keypoints: str = 'iss', descriptor: st
   points = check_cloud(points, dtype=np.float64)
   offset = local_origin(points)
   f = cloud_features(check_cloud(points - offset), keypoints, descriptor, model, seed,
-                     fpfh_max_nn)
+                     fpfh_max_nn, voxel, progress)
   f.xyz = f.xyz.astype(np.float64) + offset
   return f
 
@@ -179,7 +249,8 @@ def features_anywhere(points: np.ndarray, keypoints: str = 'iss', descriptor: st
 def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
              descriptor: str = 'fpfh', model=None, seed: int = 0,
              fpfh_max_nn: int = features.FPFH_MAX_NN, icp: bool = False,
-             estimator: str = 'rigid') -> tuple[Registration, CloudFeatures, CloudFeatures]:
+             estimator: str = 'rigid', voxel: float | None = None, verify_candidates: int = 0,
+             progress=None) -> tuple[Registration, CloudFeatures, CloudFeatures]:
   """The whole pipeline on two clouds, in the caller's coordinates.
 
   points1 (target) [N1, 3] and points2 (source) [N2, 3] metres, any float type. Clouds
@@ -188,28 +259,54 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
   register as accurately as near the origin; the returned transform T_12 and keypoints
   are in the input coordinates. Clouds near the origin are not shifted, so FPFH's
   normals keep facing the sensor there, exactly as `cloud_features` computes them.
+  Each cloud is put on the `voxel` m grid first (`to_grid`; None: the model's, 0: every
+  point as given), ICP included; each feature's `grid` says what was done. With
+  `verify_candidates` k > 0, RANSAC's k distinct best poses are checked against the
+  clouds (`verify`) and the best of them, ICP-refined, is the transform.
+  `progress(stage)`, if given, is called as each stage starts.
   -> (registration, features of cloud 1, features of cloud 2).
   """
   clouds = [check_cloud(p, name, np.float64) for p, name in ((points1, 'cloud 1'),
                                                              (points2, 'cloud 2'))]
   offset = local_origin(clouds[0], clouds[1])
-  local = [check_cloud(c - offset, name) for c, name in zip(clouds, ('cloud 1', 'cloud 2'))]
-  f1, f2 = (cloud_features(c, keypoints, descriptor, model, seed, fpfh_max_nn) for c in local)
+  voxel = voxel_size_of(model) if voxel is None else voxel
+  stage = (lambda name: None) if progress is None else progress
+  local, grids = [], []
+  for c, name in zip(clouds, ('cloud 1', 'cloud 2')):
+    stage(f'{name}: grid')
+    t0 = time.perf_counter()
+    cloud, grid = to_grid(check_cloud(c - offset, name), voxel)
+    local.append(cloud)
+    grids.append((grid, time.perf_counter() - t0))
+
+  def features_of(c, name, kind):
+    f = cloud_features(c, kind, descriptor, model, seed, fpfh_max_nn, 0,
+                       lambda s: stage(f'{name}: {s}'))
+    f.grid, f.seconds['grid'] = grids[0 if name == 'cloud 1' else 1]
+    return f
+
+  f1, f2 = (features_of(c, name, keypoints) for c, name in zip(local, ('cloud 1', 'cloud 2')))
   notes = [f'{name}: {f.note}' for name, f in (('cloud 1', f1), ('cloud 2', f2)) if f.note]
+  stage('RANSAC')
+  k = max(verify_candidates, 1)
   try:
-    reg = estimate(f1, f2, seed, estimator=estimator)
+    reg = estimate(f1, f2, seed, estimator=estimator, candidates=k)
   except ValueError as e:
     if keypoints != 'iss':
       raise
     # Degenerate samples (every match on one line of points) or too few keypoints: keypoints
     # spread over the whole of both clouds give RANSAC something to sample.
-    f1, f2 = (cloud_features(c, 'auto', descriptor, model, seed, fpfh_max_nn) for c in local)
+    f1, f2 = (features_of(c, name, 'auto') for c, name in zip(local, ('cloud 1', 'cloud 2')))
     notes.append(f'{e}; registered again with {len(f1.xyz)} / {len(f2.xyz)} farthest-point '
                  'keypoints')
-    reg = estimate(f1, f2, seed, estimator=estimator)
+    reg = estimate(f1, f2, seed, estimator=estimator, candidates=k)
+  if verify_candidates > 0:
+    stage('verification')
+    reg = verify(reg, f1, f2, local[0], local[1])
   reg.notes = notes
   transform = reg.transform
   if icp:
+    stage('ICP')
     t0 = time.perf_counter()
     transform, reg.icp_fitness = refine_icp(local[0], local[1], transform)
     reg.seconds['icp'] = time.perf_counter() - t0
