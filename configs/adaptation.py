@@ -9,10 +9,10 @@ Commands (~15 minutes on 2 CPU cores in all):
     python -m experiments.adapt --scans=data_cache/scans_vlp16 --out=exports/vlp16
     python -m experiments.evaluate --config=configs/adaptation.py --workdir=runs/adaptation
 
-Rows: the paper's protocol (ISS, RANSAC over any rotation) and the register command's
-defaults (farthest-point keypoints, upright RANSAC), for each model's descriptor.
-Expected (2026-12-03, 48 pairs): defaults 41.7 % with `ours`, 47.9 % adapted; paper
-protocol 10.4 -> 16.7 %. docs/cross_sensor.md has the table.
+Rows: the paper's protocol (ISS, RANSAC over any rotation) and farthest-point keypoints
+with upright RANSAC (the register defaults without verification), for each model's
+descriptor. Expected (2-core CPU VM, 48 pairs): farthest-point + upright 41.7 % with `ours`,
+47.9 % adapted; paper protocol 10.4 -> 16.7 %. docs/cross_sensor.md has the table.
 """
 
 from ssd_jax.configs import cross_sensor
