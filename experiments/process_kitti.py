@@ -6,7 +6,7 @@ r"""Process KITTI odometry into 3DFeat-Net's registration layout (docs/method.md
 Writes OUT/<seq>/%06d.bin (N x 6, 0.2 m voxels + normals, named by frame index),
 OUT/<seq>/groundtruths.txt (pairs < 10 m apart) and OUT/<seq>/poses.txt (the
 velodyne-frame poses of the kept frames). With --icp each pair's pose is refined
-by point-to-point ICP started at KITTI's pose; groundtruths.txt then holds the
+by point-to-plane ICP started at KITTI's pose; groundtruths.txt then holds the
 refined pose, groundtruths_kitti.txt KITTI's own, and the differences (how far
 KITTI's GPS/INS pose was off) are printed and written to icp_corrections.txt.
 """

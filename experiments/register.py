@@ -72,7 +72,8 @@ flags.DEFINE_bool('icp', False, 'Refine with point-to-plane ICP (Open3D) after R
 flags.DEFINE_integer('seed', 0, 'RANSAC / random-keypoint seed.')
 flags.DEFINE_integer('draws', 0, 'Learned descriptors: average this many random samplings '
                      "of each ball (0: the model's own setting; fewer is faster, noisier).")
-flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m normal / FPFH searches.')
+flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m FPFH search (normals: '
+                     '1 m, 30 neighbours).')
 flags.DEFINE_float('voxel', None, "Put each cloud on this grid (metres) first; default the "
                    "model's (0.2 m: the shipped models and FPFH), 0 keeps every point.")
 flags.DEFINE_bool('progress', None, 'Show each stage on stderr (default: when stderr is a '

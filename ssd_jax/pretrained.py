@@ -113,8 +113,3 @@ def load(name_or_path: str | os.PathLike, step: int | None = None) -> inference.
     return load_export(path)
   return inference.load(path, step)
 
-
-def load_config(name_or_path: str | os.PathLike) -> ml_collections.ConfigDict:
-  """The training config of a shipped name or export folder."""
-  return ml_collections.ConfigDict(
-      json.loads((Path(resolve(name_or_path)) / CONFIG_FILE).read_text())['config'])

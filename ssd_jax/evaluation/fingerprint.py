@@ -29,11 +29,6 @@ def digest(arrays: Iterable[np.ndarray]) -> str:
   return h.hexdigest()[:12]
 
 
-def file_digest(paths: Iterable[str | os.PathLike]) -> str:
-  """digest of the files' bytes, in the order given."""
-  return digest(np.fromfile(p, np.uint8) for p in paths)
-
-
 def params_digest(variables) -> str:
   """digest of a model's parameters and statistics (pytree leaves in tree order)."""
   return digest(np.asarray(leaf) for leaf in jax.tree.leaves(jax.device_get(variables)))
