@@ -11,7 +11,7 @@ it needs a checkpoint whose attention head was trained (the weakly supervised
 from absl import app
 from absl import flags
 
-from ssd_jax import cli, inference, viz
+from ssd_jax import cli, pretrained, viz
 from ssd_jax.data import clean, io
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import pipeline
@@ -20,7 +20,8 @@ FLAGS = flags.FLAGS
 flags.DEFINE_string('cloud', None, 'Cloud file (.bin, .npy, .ply, .pcd).')
 flags.DEFINE_string('out', None, 'PNG to write.')
 flags.DEFINE_list('sources', ['iss'], 'Keypoint sources: iss, learned, random.')
-flags.DEFINE_string('checkpoint', None, 'Training workdir for learned keypoints.')
+flags.DEFINE_string('checkpoint', None, 'Shipped model name (ours_detector), export folder or '
+                    'training workdir for learned keypoints.')
 flags.mark_flags_as_required(['cloud', 'out'])
 
 
@@ -37,7 +38,7 @@ def main(argv):
     points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
     model = None
     if FLAGS.checkpoint:
-      model = inference.load(FLAGS.checkpoint)
+      model = pretrained.load(FLAGS.checkpoint)
   except (io.CloudFileError, FileNotFoundError, ValueError) as e:
     raise SystemExit(f'error: {e}') from None
   shown = {}

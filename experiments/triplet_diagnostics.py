@@ -17,12 +17,13 @@ from absl import flags
 import jax
 import numpy as np
 
-from ssd_jax import cli, config_checks, inference, train
+from ssd_jax import cli, config_checks, inference, pretrained, train
 from ssd_jax.evaluation import orientation, triplets
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
-flags.DEFINE_string('workdir', None, 'Workdir of the triplet-trained run.')
+flags.DEFINE_string('workdir', None, 'The triplet-trained model: its training workdir, an '
+                    'export folder or a shipped name (feat3dnet).')
 flags.DEFINE_bool('fpfh', True, 'Also measure FPFH on the probe triplets (~1 s per triplet).')
 cli.define_config_file('config', None, 'The run\'s training config.')
 flags.mark_flags_as_required(['workdir', 'config'])
@@ -41,7 +42,7 @@ def main(argv):
   try:   # a missing checkpoint or train.txt, bad clouds: one line, no traceback
     config_checks.check_config(config)
     probe = train.probe_triplets(train.triplet_dataset(config), config)
-    trained = inference.load(FLAGS.workdir)
+    trained = pretrained.load(FLAGS.workdir)
     fresh = jax.device_get(train.create_train_state(config, jax.random.key(config.seed)))
     untrained = inference.Model.from_config(
         config, {'params': fresh.params, 'batch_stats': fresh.batch_stats})

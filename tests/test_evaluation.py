@@ -247,6 +247,13 @@ def test_plot_keypoints_cli(synthetic_root, tmp_path):
                         f'--out={tmp_path / "k.png"}', '--sources=iss,learned'], cwd=ROOT,
                        capture_output=True, text=True, timeout=300)
   assert run.returncode != 0 and 'learned keypoints need --checkpoint' in run.stderr
+  # A shipped name, as every --checkpoint takes one.
+  run = subprocess.run([sys.executable, '-m', 'experiments.plot_keypoints', f'--cloud={cloud}',
+                        f'--out={tmp_path / "k.png"}', '--sources=learned',
+                        '--checkpoint=ours_detector'], cwd=ROOT, capture_output=True, text=True,
+                       timeout=300)
+  assert run.returncode == 0, run.stderr[-3000:]
+  assert int(run.stdout.split('learned: ')[1].split()[0]) >= 64
 
 
 def test_descriptor_matching_cli_names_a_truncated_cluster(tmp_path):
