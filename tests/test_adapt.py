@@ -7,6 +7,7 @@ import sys
 
 import jax
 import numpy as np
+import pytest
 
 from ssd_jax import pretrained
 from ssd_jax.data import benchmarks, io
@@ -15,6 +16,7 @@ from ssd_jax.registration import metrics, pipeline
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+@pytest.mark.slow
 def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_path):
   out = tmp_path / 'mine'
   cmd = [sys.executable, '-m', 'experiments.adapt', f'--scans={synthetic_root / "train" / "00"}',

@@ -49,6 +49,7 @@ def _damage(step_dir, kind):
   target.write_bytes(target.read_bytes()[:40])
 
 
+@pytest.mark.slow
 def test_damaged_newest_checkpoint_falls_back_or_is_named(tiny_config, tmp_path):
   tiny_config.data.path = str(shared_path('kitti_object_velodyne'))
   tiny_config.train.num_steps = 4

@@ -5,6 +5,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from ssd_jax import cli
 from tests.conftest import shared_path
 
@@ -32,6 +34,7 @@ def test_config_paths_resolve_to_the_project_from_anywhere(tmp_path, monkeypatch
   assert out[:2] + out[3:] == args[:2] + args[3:]
 
 
+@pytest.mark.slow
 def test_console_scripts_register_and_train_outside_the_repository(tmp_path):
   """`ssd-jax-register` with the shipped model and `ssd-jax-train` with a project config
   run from a folder that is not the repository."""

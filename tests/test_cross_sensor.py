@@ -107,6 +107,7 @@ def test_pair_info_errors_name_the_file(tmp_path):
     benchmarks.read_pair_info(tmp_path)
 
 
+@pytest.mark.slow
 def test_cross_sensor_evaluation_writes_the_matrix(tiny_set, tmp_path):
   config = cross_sensor_eval.get_config()
   config.data_root = str(tiny_set.parent)

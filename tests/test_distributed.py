@@ -85,6 +85,7 @@ def test_helpers_in_one_process():
   assert seen == [0, 1, 2]
 
 
+@pytest.mark.slow
 def test_two_processes_train_like_one_and_share_checkpoints(synthetic_root, tmp_path):
   one, two = tmp_path / 'one', tmp_path / 'two'
 
@@ -110,6 +111,7 @@ def test_two_processes_train_like_one_and_share_checkpoints(synthetic_root, tmp_
   np.testing.assert_allclose([l2[s] for s in (5, 6)], [l1[s] for s in (5, 6)], rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_evaluation_split_over_two_processes_writes_the_same_table(synthetic_root, tmp_path):
   args = ['--config=configs/registration.py', f'--config.data_root={synthetic_root}',
           '--config.evals.registration.dataset=test_kitti', '--config.max_pairs=3',
@@ -135,6 +137,7 @@ def _one_error_line(text: str) -> str:
   return errors[0]
 
 
+@pytest.mark.slow
 def test_a_process_that_never_joins_ends_the_run_in_one_line(synthetic_root, tmp_path):
   port = _free_port()
   t0 = time.monotonic()
@@ -160,6 +163,7 @@ def test_wrong_process_settings_are_one_line(args, message, tmp_path):
   assert _one_error_line(proc.stderr) == f'error: {message}'
 
 
+@pytest.mark.slow
 def test_a_killed_process_stops_the_run_and_the_rerun_resumes(synthetic_root, tmp_path):
   args = TINY_TRAIN + [f'--config.data.path={synthetic_root / "train"}', f'--workdir={tmp_path}']
   # New sessions: killing process 1's group kills the command and its worker at once.

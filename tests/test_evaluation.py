@@ -155,6 +155,7 @@ def _csv(path):
     return list(csv.reader(f))
 
 
+@pytest.mark.slow
 def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path):
   out = tmp_path / 'out'
   run = subprocess.run(
@@ -275,6 +276,7 @@ def test_descriptor_matching_cli_names_a_truncated_cluster(tmp_path):
 
 # ---- learning curve ------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_learning_curve_rows_resume_and_cli(synthetic_root, tiny_checkpoint, tmp_path):
   pairs = benchmarks.read_registration_set(synthetic_root / 'test_oxford')[:2]
   csv_path = tmp_path / 'curve.csv'

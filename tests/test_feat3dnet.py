@@ -133,6 +133,7 @@ def _triplet_config(tiny_config, root, stage):
   return config
 
 
+@pytest.mark.slow
 def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_root, tmp_path):
   pre = _triplet_config(tiny_config, synthetic_root, 'pretrain')
   pre.train.num_steps = 2
@@ -217,6 +218,7 @@ def _attention_grad(config):
   return jax.grad(loss)(state.params)['detector']['attention']['kernel']
 
 
+@pytest.mark.slow
 def test_self_supervised_detector_trains_attention_only_when_on(tiny_config):
   assert float(jnp.abs(_attention_grad(tiny_config)).max()) == 0.0   # the paper: no gradient
   tiny_config.model.attention_in_cf = True

@@ -146,6 +146,7 @@ def test_bad_clouds_are_refused(model):
                        search='octree')
 
 
+@pytest.mark.slow
 def test_load_restores_a_training_run(tiny_config, tmp_path):
   rng = np.random.default_rng(5)
   for i in range(3):

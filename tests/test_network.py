@@ -14,6 +14,7 @@ def _clusters_of(points, centers, radius=2.0, c=32):
   return grouping.group_points(points, centers, idx, has, radius)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('dim', network.DESCRIPTOR_DIMS)
 def test_feature_net_shapes_and_unit_descriptors(dim):
   clusters = jax.random.uniform(jax.random.key(0), (2, 8, 16, 3), minval=-1, maxval=1)
@@ -32,6 +33,7 @@ def test_bad_descriptor_dim_is_a_clear_error():
     network.FeatureNet(descriptor_dim=20).init(jax.random.key(0), jnp.zeros((1, 4, 8, 3)))
 
 
+@pytest.mark.slow
 def test_descriptors_invariant_to_z_rotation_with_shifted_orientation():
   rng = np.random.default_rng(0)
   cloud = jnp.asarray(rng.uniform(-6, 6, (1500, 3)) * np.array([1, 1, 0.3]), jnp.float32)
@@ -78,6 +80,7 @@ def test_batch_norm_relu_matches_autodiff_of_textbook_formula():
   np.testing.assert_allclose(var, jnp.var(x, 0), rtol=1e-4)
 
 
+@pytest.mark.slow
 def test_running_statistics_are_updated_in_training_only():
   model = network.FeatureNet()
   clusters = jax.random.uniform(jax.random.key(0), (1, 8, 16, 3), minval=-1, maxval=1)
@@ -101,6 +104,7 @@ def _oriented_clusters(rng, n):
                                   jnp.asarray(rng.uniform(0, 2 * np.pi, n), jnp.float32))
 
 
+@pytest.mark.slow
 def test_detector_can_learn_to_turn_with_the_cluster():
   """The orientation head (atan2 of a learned 2-vector) can learn equivariance: supervised
   directly on theta(turned by phi) - theta = phi, the held-out error falls from chance

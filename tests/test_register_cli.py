@@ -56,6 +56,7 @@ def test_register_cli_fpfh_on_a_synthetic_pair(tiny_set, tmp_path):
   assert 'vs ground truth: RTE' in out.stdout
 
 
+@pytest.mark.slow
 def test_register_cli_errors(tiny_set, tmp_path):
   cloud = tiny_set / 'test_kitti' / '00' / '000000.bin'
   out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={tmp_path / "nope.bin"}')
@@ -79,6 +80,7 @@ def test_register_cli_errors(tiny_set, tmp_path):
   assert out.returncode != 0 and 'Traceback' not in out.stderr
 
 
+@pytest.mark.slow
 def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
   """No --checkpoint: the shipped `ours` model describes, and the pair registers."""
   folder = tiny_set / 'test_kitti' / '00'
@@ -118,6 +120,7 @@ def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):
 @pytest.mark.parametrize('names,descriptor', [
     (('oxford_270', 'oxford_456'), 'learned'), (('kitti_00_001554', 'kitti_00_004534'), 'learned'),
     (('kitti_00_001554', 'kitti_00_004534'), 'fpfh')])
+@pytest.mark.slow
 def test_register_cli_on_real_pairs(names, descriptor, tmp_path):
   """The real pairs have no ground truth: the RANSAC pose must be a success (RTE < 2 m,
   RRE < 5°) against the ICP-refined pose, and most points of cloud 2 must land on cloud 1.
@@ -152,6 +155,7 @@ print(json.dumps(results))
 '''
 
 
+@pytest.mark.slow
 def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set, tmp_path):
   """A table of damaged, odd and far-away files through `register` (one process): each
   ends in a one-line error or in a correct transform, never in exit 0 with a wrong one."""
@@ -217,6 +221,7 @@ def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set
     assert np.median(err) < 0.5 and err.max() < 2.0, (name, np.median(err), err.max())
 
 
+@pytest.mark.slow
 def test_the_compilation_cache_keeps_kernels_and_changes_no_result(tiny_set, tmp_path):
   pair = benchmarks.read_registration_set(tiny_set / 'test_kitti' / '00')[0]
   args = ['experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
@@ -237,6 +242,7 @@ def test_the_compilation_cache_keeps_kernels_and_changes_no_result(tiny_set, tmp
     np.testing.assert_allclose(r['T_12'], results[0]['T_12'], rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
   folder = tiny_set / 'test_kitti' / '00'
   scans = sorted(folder.glob('*.bin'))[:4]
@@ -273,6 +279,7 @@ def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
       f"error: {tmp_path / 'bad.txt'}, line 1: expected \"cloud1 cloud2\", got 'a.bin b.bin c.bin'")
 
 
+@pytest.mark.slow
 def test_las_and_laz_register_like_the_same_points_in_ply(tiny_set, tmp_path):
   pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
   offset = np.array([500_000.0, 4_000_000.0, 100.0])   # UTM-like map coordinates
@@ -305,6 +312,7 @@ def test_las_and_laz_register_like_the_same_points_in_ply(tiny_set, tmp_path):
   assert 0 < r['fitness'] <= 1 and 0 < r['inlier_rmse'] < 1 and r['correspondence_set_size'] >= 3
 
 
+@pytest.mark.slow
 def test_register_puts_dense_clouds_on_the_grid_and_voxel_0_keeps_every_point(tiny_set, tmp_path):
   pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
   rng = np.random.default_rng(0)

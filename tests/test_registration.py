@@ -290,6 +290,7 @@ def test_upright_fit_is_exact_and_upright_ransac_finds_a_pose_at_few_inliers():
                       pipeline.CloudFeatures(src, np.eye(400), {}), estimator='affine')
 
 
+@pytest.mark.slow
 def test_fpfh_keeps_its_4m_ball_on_a_dense_cloud_and_is_unchanged_on_a_voxelised_one():
   voxelised = io.read_cloud(shared_path('example', 'kitti_00_001554.bin'))
   kp = keypoints.iss(voxelised)[:50]
@@ -306,6 +307,7 @@ def test_fpfh_keeps_its_4m_ball_on_a_dense_cloud_and_is_unchanged_on_a_voxelised
   assert dist(gridded) < 0.7 * dist(capped)
 
 
+@pytest.mark.slow
 def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root):
   """A pair densified 12x (3 cm jitter, ~250 k points per cloud) is put on the 0.2 m grid
   and registers to the transform of the pair as given (5 cm, 0.2 degrees); voxel=0

@@ -400,6 +400,7 @@ def test_pushbroom_lines_on_a_known_street():
       sensor(range_noise=-0.1)
 
 
+@pytest.mark.slow
 def test_synthetic_report_covers_both_test_splits(synthetic_root, tmp_path):
   real = shared_path()
   out = subprocess.run([sys.executable, '-m', 'experiments.synthetic_report',

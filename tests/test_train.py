@@ -46,6 +46,7 @@ def _robust(config):
   return config
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('variant', ['paper', 'robust'])
 def test_train_step_compiles_once_and_is_deterministic(tiny_config, variant):
   if variant == 'robust':
@@ -64,6 +65,7 @@ def test_train_step_compiles_once_and_is_deterministic(tiny_config, variant):
   assert not np.array_equal(jax.tree.leaves(other.params)[0], jax.tree.leaves(runs[0])[0])
 
 
+@pytest.mark.slow
 def test_a_second_view_trains_the_second_branch_on_it(tiny_config):
   """[B, 2, N, 3] batches (a cloud beside its re-scan): one compiled step; with the cloud
   itself as its second view it is the paper's step bit for bit; with another view, not."""
@@ -83,6 +85,7 @@ def test_a_second_view_trains_the_second_branch_on_it(tiny_config):
   assert float(m_other['rotation_error_deg']) != float(m_ref['rotation_error_deg'])
 
 
+@pytest.mark.slow
 def test_nan_batch_skips_the_update(tiny_config):
   step = _step_fn(tiny_config)
   state = train.create_train_state(tiny_config, jax.random.key(0))
@@ -94,6 +97,7 @@ def test_nan_batch_skips_the_update(tiny_config):
   assert int(state.step) == 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('scene', ['identical', 'few_points', 'planar', 'collinear'])
 def test_degenerate_batches_give_finite_loss_and_gradients(tiny_config, scene):
   step = _step_fn(tiny_config)
@@ -136,6 +140,7 @@ def _read_metrics(workdir):
     return [{k: v for k, v in json.loads(line).items() if k != 'steps_per_sec'} for line in f]
 
 
+@pytest.mark.slow
 def test_resume_after_a_crash_is_bitwise_identical(tiny_config, tmp_path, monkeypatch):
   data = str(shared_path('kitti_object_velodyne'))
   config = tiny_config
@@ -167,6 +172,7 @@ def test_resume_after_a_crash_is_bitwise_identical(tiny_config, tmp_path, monkey
   assert [m['step'] for m in _read_metrics(tmp_path / 'resumed')] == list(range(1, 9))
 
 
+@pytest.mark.slow
 def test_divergence_stops_with_a_clear_message(tiny_config, tmp_path, monkeypatch):
   config = tiny_config
   config.data.path = str(shared_path('kitti_object_velodyne'))
@@ -185,6 +191,7 @@ def test_divergence_stops_with_a_clear_message(tiny_config, tmp_path, monkeypatc
   assert sorted(os.listdir(tmp_path / 'run' / 'checkpoints')) == ['2']
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('source', [('kitti_object_velodyne',), ('example',), 'synthetic'])
 def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
   """On both real formats and on the generated synthetic training folder.
@@ -217,6 +224,7 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
   assert median(late, 'rotation_error_deg') < 0.8 * median(first, 'rotation_error_deg')
 
 
+@pytest.mark.slow
 def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
   script = textwrap.dedent('''
       import jax, numpy as np
@@ -259,6 +267,7 @@ def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
   assert 'rel diffs: gradient' in out.stdout
 
 
+@pytest.mark.slow
 def test_resuming_with_a_different_model_is_refused(tiny_config, tmp_path):
   tiny_config.data.path = str(shared_path('kitti_object_velodyne'))
   tiny_config.train.num_steps = 2
