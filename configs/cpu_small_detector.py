@@ -9,7 +9,7 @@ Command (after the README's main job):
 
 Its detector then supplies the "Ours (self-sup. detector)" keypoint rows of
 configs/registration.py. The paper's authors report that their own attempt at
-training attention this way failed; see the README for what it
+training attention this way failed; docs/feat3dnet_baseline.md measures what it
 does here.
 """
 

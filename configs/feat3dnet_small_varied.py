@@ -11,7 +11,7 @@ Commands (after `experiments.make_synthetic --config=configs/synthetic_small_var
 configs/feat3dnet_small.py with two changes: the training split of
 configs/synthetic_small_varied.py, and a 4 m cluster radius on both stages. Under
 Rotate1D, stage 2 of configs/feat3dnet_small.py stays at chance; each change alone moves
-it little, and together they lower its loss (README, "3DFeat-Net baseline"). Held-out
+it little, and together they lower its loss (docs/feat3dnet_baseline.md). Held-out
 evaluation stays on `synthetic_small`'s test models.
 
 Expected (2-core VM, measured 2026-11-25), `probe_loss` in metrics.jsonl (chance

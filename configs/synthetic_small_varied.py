@@ -12,7 +12,7 @@ planters), and half of the parked cars at an angle. No test splits: models train
 it are evaluated on `synthetic_small`'s. It exists because on `synthetic_small`'s
 streets, whose objects face the street, a 2-4 m neighbourhood turned about z tells
 places apart too weakly for 3DFeat-Net's stage 2 to learn under Rotate1D in a CPU-length
-run (README, "3DFeat-Net baseline"); configs/feat3dnet_small_varied.py trains on it.
+run (docs/feat3dnet_baseline.md); configs/feat3dnet_small_varied.py trains on it.
 """
 
 from ssd_jax.configs import synthetic_small
