@@ -25,6 +25,7 @@ def test_config_errors_name_the_value(tiny_config):
            ('model.branch_fov_rate', -0.1, r'branch_fov_rate must be in \[0, 1\]'),
            ('model.branch_beam_spacing', (2.0, 1.0), 'branch_beam_spacing must be'),
            ('model.branch_fov', (90.0, 400.0), 'branch_fov must be within 360'),
+           ('inference.voxel_size', -0.2, 'inference.voxel_size must be >= 0 metres'),
            ('train.init_scope', 'detector', "init_scope must be 'descriptor' or 'model'"),
            ('train.lr_schedule', 'step', "lr_schedule must be one of .*'step'")]
   for field, value, message in cases:

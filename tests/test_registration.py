@@ -318,7 +318,12 @@ def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root
   dense = [np.repeat(c, 12, axis=0) + rng.normal(0, 0.03, (12 * len(c), 3)) for c in (c1, c2)]
   reg, f1, f2 = pipeline.register(c1, c2, 'auto', 'fpfh', estimator='upright', icp=True)
   assert 'used as given' in f1.grid and 'used as given' in f2.grid
-  reg_d, g1, g2 = pipeline.register(*dense, 'auto', 'fpfh', estimator='upright', icp=True)
+  stages = []
+  reg_d, g1, g2 = pipeline.register(*dense, 'auto', 'fpfh', estimator='upright', icp=True,
+                                    progress=stages.append)
+  assert stages == ['cloud 1: grid', 'cloud 2: grid', 'cloud 1: keypoints',
+                    'cloud 1: descriptors', 'cloud 2: keypoints', 'cloud 2: descriptors',
+                    'RANSAC', 'ICP']
   assert g1.grid == f'{len(dense[0]):,} -> {g1.grid.split()[2]} points on the 0.2 m grid'
   assert int(g1.grid.split()[2].replace(",", "")) < 2 * len(c1)   # vs 12x as given
   assert metrics.registration_errors(pair.transform, reg.transform)['success']

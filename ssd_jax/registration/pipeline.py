@@ -325,18 +325,9 @@ def refine_icp(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
   points1 is the target (normals estimated within 1 m), points2 the source.
   -> (T_12, fitness in [0, 1]: share of cloud-2 points with a partner).
   """
-  import open3d as o3d  # pylint: disable=g-import-not-at-top
-  reg = o3d.pipelines.registration
-  pcd = lambda p: o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(p, np.float64)))
-  target = pcd(points1)
-  target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=1.0, max_nn=30))
-  source, t = pcd(points2), np.asarray(transform, np.float64)
-  for dist in (max_distance, max_distance / 2):
-    result = reg.registration_icp(source, target, dist, t,
-                                  reg.TransformationEstimationPointToPlane(),
-                                  reg.ICPConvergenceCriteria(max_iteration=50))
-    t = np.asarray(result.transformation)
-  return t, float(result.fitness)
+  target, source = verification.open3d_clouds(points1, points2)
+  return verification.point_to_plane_icp(target, source, transform,
+                                         (max_distance, max_distance / 2), iterations=50)
 
 
 def overlap_fitness(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
