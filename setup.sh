@@ -16,9 +16,16 @@ python="${PYTHON:-python3}"
 if [ ! -x .venv/bin/python ]; then
   "$python" -m venv .venv
 fi
-.venv/bin/python -m pip install -q --upgrade pip
 # Pinned versions (constraints.txt): a fresh clone gets the libraries the results were
 # measured with, so two machines compute the same numbers.
 constraints=(-c constraints.txt)
 if [ "${SSD_JAX_UNPINNED:-0}" = "1" ]; then constraints=(); fi
-.venv/bin/python -m pip install -q "${constraints[@]}" -e '.[test]'
+# pip's and setuptools' notes go to a log, shown in full if the install fails.
+log=.venv/setup.log
+echo "setup: installing ssd_jax and its libraries into .venv (about 3 minutes the first time)"
+if ! { .venv/bin/python -m pip install -q --upgrade pip &&
+       .venv/bin/python -m pip install -q "${constraints[@]}" -e '.[test]'; } >"$log" 2>&1; then
+  cat "$log" >&2
+  echo "setup: installing the package failed (the log above is in $log)" >&2
+  exit 1
+fi

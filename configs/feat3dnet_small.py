@@ -22,8 +22,8 @@ stays at chance: 0.192 at step 0, 0.190 to 0.197 at the probes up to step 2,500 
 Rotate1D (`--config.model.augmentations="('jitter','rotate_small','shift')"`) it falls
 from 0.140 to 0.060 in 600 steps; with Rotate1D but each cloud its own positive
 (`--config.data.triplet_positives=self`) from 0.186 to 0.138 in 3,000 steps. With a
-hinge per cluster (`--config.model.triplet_hinge=cluster`, this codebase's form before
-2026-11-24) stage 2 resumed to 18,000 steps still swung at chance, 0.192 to 0.204.
+hinge per cluster (`--config.model.triplet_hinge=cluster`) stage 2 resumed to 18,000 steps
+still swung at chance, 0.192 to 0.204.
 docs/feat3dnet_baseline.md has the diagnosis. configs/feat3dnet_small_varied.py is
 this recipe on training streets with turned street furniture and 4 m clusters, where
 stage 2 does lower its loss; the evaluations' default baseline checkpoint is that run.

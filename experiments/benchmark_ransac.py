@@ -19,7 +19,7 @@ import numpy as np
 from tqdm import auto as tqdm
 
 from ssd_jax import cli
-from ssd_jax.data import benchmarks, io
+from ssd_jax.data import io, registration_sets
 from ssd_jax.registration import matching, metrics, pipeline, ransac
 
 FLAGS = flags.FLAGS
@@ -43,7 +43,7 @@ def open3d_ransac(xyz1, xyz2, max_trials, confidence, threshold, seed):
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
-  pairs = benchmarks.read_registration_set(FLAGS.dataset)
+  pairs = registration_sets.read_registration_set(FLAGS.dataset)
   if FLAGS.max_pairs:
     pairs = pairs[:FLAGS.max_pairs]
   cache = {}

@@ -42,7 +42,7 @@ import numpy as np
 from tqdm import auto as tqdm
 
 from ssd_jax import cli, pretrained
-from ssd_jax.data import benchmarks, clean, io
+from ssd_jax.data import clean, io, registration_sets
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.data import preprocess
 from ssd_jax.registration import features, metrics, pipeline
@@ -168,7 +168,7 @@ def main(argv):
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
   try:
-    pairs = benchmarks.read_registration_set(FLAGS.dataset)[:FLAGS.num_pairs]
+    pairs = registration_sets.read_registration_set(FLAGS.dataset)[:FLAGS.num_pairs]
   except io.CloudFileError as e:
     raise SystemExit(f'error: {e}') from None
   if len(pairs) < 2:

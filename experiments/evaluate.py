@@ -19,7 +19,7 @@ import sys
 from absl import app
 from absl import flags
 
-from ssd_jax import cli, distributed
+from ssd_jax import cli, distributed, errors
 from ssd_jax.evaluation import evaluators
 from ssd_jax.logging_utils import quiet_libraries
 
@@ -42,7 +42,7 @@ def main(argv):
     if distributed.is_peer_failure(e):   # first: a collective may raise it as a ValueError
       distributed.fail(f'gathering results from the other processes failed '
                        f'({str(e).splitlines()[0][:200]}): another process probably stopped')
-    if isinstance(e, ValueError):   # bad rows or types, missing, truncated or degenerate data
+    if isinstance(e, errors.UserError):   # bad rows or types, missing or damaged data
       raise SystemExit(f'error: {e}') from None
     raise
   if distributed.is_main():

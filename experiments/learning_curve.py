@@ -21,7 +21,7 @@ from absl import app
 from absl import flags
 
 from ssd_jax import checkpoint, cli, inference, viz
-from ssd_jax.data import benchmarks, io
+from ssd_jax.data import io, registration_sets
 from ssd_jax.evaluation import learning_curve, tables
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import features
@@ -100,7 +100,7 @@ def main(argv):
       if not os.path.exists(path) and path in _MADE_BY:
         raise ValueError(f'{path}: no such test set; make it with {_MADE_BY[path]} '
                          '(or leave it out with --set=NAME=DIR for the sets you have)')
-      sets[name] = benchmarks.read_registration_set(path)
+      sets[name] = registration_sets.read_registration_set(path)
     wanted = [int(s) for s in FLAGS.steps]
     checkpoints = []
     for name, path in runs.items():

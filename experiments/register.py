@@ -3,7 +3,7 @@ r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into clou
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin \
         [--keypoints=auto|iss|learned|random] [--descriptor=fpfh|learned|learned,fpfh] \
         [--checkpoint=ours|RUN_DIR|EXPORT_DIR] [--groundtruth=DIR/groundtruths.txt] \
-        [--voxel=SIZE] [--verify=K] [--icp] [--draws=N] [--json=OUT.json] [--plot=OUT.png]
+        [--voxel=SIZE] [--verify=K] [--bev=B] [--icp] [--draws=N] [--json=OUT.json] [--plot=OUT.png]
     # many pairs in one process: a list of pairs, or the consecutive scans of a folder
     python -m experiments.register --pairs=PAIRS.txt --out=DIR [--descriptor=learned]
     python -m experiments.register --sequence=SCANS_DIR --out=DIR [--groundtruth=...]
@@ -15,7 +15,8 @@ what a 0.2 m-voxel scan does. On a terminal each stage shows its progress (--pro
 forces it on a pipe too, --noprogress turns it off).
 
 By default: 1,024 farthest-point keypoints, upright RANSAC, and RANSAC's 10 best distinct
-poses checked against the clouds by ICP (--verify; docs/cross_sensor.md).
+poses, with the 5 best of a bird's-eye-view search over every yaw and shift, checked
+against the clouds by ICP (--verify, --bev; docs/cross_sensor.md).
 
 Reads .bin (N x 3 / 4 / 6 float32 or float64 rows, detected or --format), .npy, .ply, .pcd,
 .las, .laz. Learned descriptors and keypoints come from the shipped pretrained models
@@ -62,8 +63,11 @@ flags.DEFINE_enum('ransac', 'upright', pipeline.ESTIMATORS,
                   'or upright (2-point samples of a turn about z and a shift, for scans whose '
                   'z axis is up; refit in 6 degrees of freedom).')
 flags.DEFINE_integer('verify', 10, "Check RANSAC's this many distinct best poses against the "
-                     'clouds (ICP each, keep the one that lays the most of cloud 2 on cloud 1); '
-                     "0 keeps RANSAC's best as it is.")
+                     'clouds (ICP each, keep the one that lays the most of what rises from '
+                     "cloud 2's ground on cloud 1); 0 keeps RANSAC's best as it is.")
+flags.DEFINE_integer('bev', 5, "With upright RANSAC and --verify: also check the bird's-eye-"
+                     'view search\'s this many best poses (every yaw and shift of the two '
+                     'top-down maps of what rises above the ground); 0: RANSAC\'s only.')
 flags.DEFINE_list('descriptor', ['fpfh'], 'Descriptor(s): fpfh, learned; a list runs each.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model name, export folder or training workdir '
                     'for learned (default: the shipped ours / ours_detector).')
@@ -217,7 +221,8 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
               'registered again with farthest-point keypoints')
           reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac, candidates=k)
         if FLAGS.verify > 0:
-          reg = pipeline.verify(reg, f1, f2, read(cloud1), read(cloud2))
+          reg = pipeline.verify(reg, f1, f2, read(cloud1), read(cloud2),
+                                bev_candidates=_bev_candidates())
         t, inliers, trials, error = reg.transform, int(reg.inliers.sum()), reg.trials, ''
         keypoints = (len(f1.xyz), len(f2.xyz))
       except (io.CloudFileError, clean.CloudDataError):
@@ -255,6 +260,11 @@ def _load_model(checkpoint: str):
   return dataclasses.replace(model, draws=FLAGS.draws) if FLAGS.draws else model
 
 
+def _bev_candidates() -> int:
+  """--bev where it applies (upright scans, verified poses), else 0."""
+  return FLAGS.bev if FLAGS.ransac == 'upright' and FLAGS.verify > 0 else 0
+
+
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
@@ -270,6 +280,11 @@ def main(argv):
                      '--descriptor (not --cloud1/--cloud2/--json/--plot/--icp)')
   if FLAGS.verify < 0:
     raise SystemExit(f'error: --verify must be >= 0 (0: no verification), got {FLAGS.verify}')
+  if FLAGS.bev < 0:
+    raise SystemExit(f'error: --bev must be >= 0 (0: no BEV search), got {FLAGS.bev}')
+  if FLAGS['bev'].present and FLAGS.bev > 0 and not _bev_candidates():
+    raise SystemExit('error: --bev needs --ransac=upright and --verify > 0 (its poses turn '
+                     'about z only, and are checked with RANSAC\'s)')
   if not batch and not (FLAGS.cloud1 and FLAGS.cloud2):
     raise SystemExit('error: give --cloud1 and --cloud2 (or --pairs / --sequence with --out)')
   needs_model = 'learned' in FLAGS.descriptor or FLAGS.keypoints == 'learned'
@@ -317,7 +332,7 @@ def main(argv):
       reg, f1, f2 = pipeline.register(
           clouds[0], clouds[1], FLAGS.keypoints, descriptor, model, FLAGS.seed,
           FLAGS.fpfh_max_nn, icp=FLAGS.icp, estimator=FLAGS.ransac, voxel=0,
-          verify_candidates=FLAGS.verify,
+          verify_candidates=FLAGS.verify, bev_candidates=_bev_candidates(),
           progress=lambda name: stage(f'{descriptor}: {name}') if 'grid' not in name else None)
     except ValueError as e:
       bar.close()

@@ -22,7 +22,7 @@ import numpy as np
 from tqdm import auto as tqdm
 
 from ssd_jax import cli
-from ssd_jax.data import benchmarks, clean, io
+from ssd_jax.data import clean, io, registration_sets
 from ssd_jax.evaluation import feature_store, registration, tables
 from ssd_jax.registration import metrics
 from ssd_jax.registration.reference import SETTINGS, open3d_register
@@ -46,12 +46,12 @@ def baseline_table(split_dir: str, max_pairs: int, max_nn: int, paper_set: str,
   """ISS + FPFH + RANSAC on a split's test pairs, as Tables I/II register them (and
   Open3D's own pipeline when asked), with the paper's row beside -> (Markdown table,
   {row: summary with seconds}, {row: per-pair results})."""
-  pairs = benchmarks.read_registration_set(split_dir)
+  pairs = registration_sets.read_registration_set(split_dir)
   pairs = pairs[:max_pairs] if max_pairs else pairs
   start = time.perf_counter()
   results = registration.register_pairs(pairs, ['iss+fpfh'], feature_store.FeatureStore(
       {}, fpfh_max_nn=max_nn), desc='ISS+FPFH+RANSAC')
-  summaries = {'iss+fpfh': {**metrics.summarize(results['iss+fpfh']),
+  summaries = {'iss+fpfh': {**registration.summarize(results['iss+fpfh']),
                             'seconds': time.perf_counter() - start}}
   header, table = registration.registration_table(results, ['iss+fpfh'], {}, paper_set)
   for settings in (SETTINGS if with_open3d else ()):
@@ -63,7 +63,7 @@ def baseline_table(split_dir: str, max_pairs: int, max_nn: int, paper_set: str,
       t, _, _ = open3d_register(*clouds, seed=n, settings=settings)
       # Open3D does not report its trial count.
       plain.append({**metrics.registration_errors(pair.transform, t), 'trials': float('nan')})
-    s = metrics.summarize(plain)
+    s = registration.summarize(plain)
     summaries[f'open3d_{settings}'] = {**s, 'seconds': time.perf_counter() - start}
     results[f'open3d_{settings}'] = plain
     table.append([f'Open3D pipeline, {SETTINGS[settings].label}', s['pairs'],

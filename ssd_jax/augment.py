@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import ml_collections
 
 from ssd_jax import geometry
 
@@ -141,3 +142,40 @@ def fov_crop(key: jax.Array, points: jax.Array, valid: jax.Array, rate: float,
   az = jnp.arctan2(points[..., 1], points[..., 0]) - heading
   inside = jnp.abs(jnp.arctan2(jnp.sin(az), jnp.cos(az))) <= half
   return valid & (inside | ~_per_cloud_chance(k_on, b, rate))
+
+
+# Fewer points than this in a branch after a simulated sensor change keep the branch as it
+# was: a branch with a handful of clusters gives CF no rotation to recover.
+MIN_BRANCH_POINTS = 512
+
+
+def resample_branch(key: jax.Array, points: jax.Array, valid: jax.Array,
+                    cfg: ml_collections.ConfigDict) -> jax.Array:
+  """The points one branch keeps, valid [B, N] -> [B, N], so that the two branches differ
+  as two scans of a place do:
+
+    * `cfg.branch_dropout` (max share dropped) and `cfg.branch_crop_shift` /
+      `cfg.branch_crop_radius` (metres; a crop around an offset sensor): another
+      sampling, another standpoint;
+    * `cfg.branch_sensor_rate` (chance per cloud) with `cfg.branch_beam_spacing`
+      (degrees): another, sparser beam pattern (`beam_resample`);
+    * `cfg.branch_fov_rate` with `cfg.branch_fov` (degrees): a limited horizontal field
+      of view (`fov_crop`).
+
+  A sensor change that would leave a cloud fewer than `MIN_BRANCH_POINTS` points is not
+  applied to it. Points are given in the unrotated frame, so the crop of PC2 is drawn in
+  PC1's frame: the same thing as a crop drawn after the rotation."""
+  k_drop, k_crop, k_beam, k_fov = jax.random.split(key, 4)
+  if cfg.branch_dropout > 0:
+    valid = point_dropout(k_drop, valid, cfg.branch_dropout)
+  if cfg.branch_crop_shift > 0:
+    valid = crop_around_offset(k_crop, points, valid, cfg.branch_crop_shift,
+                                       cfg.branch_crop_radius)
+  sensor = valid
+  if cfg.branch_sensor_rate > 0:
+    sensor = beam_resample(k_beam, points, sensor, cfg.branch_sensor_rate,
+                                   tuple(cfg.branch_beam_spacing))
+  if cfg.branch_fov_rate > 0:
+    sensor = fov_crop(k_fov, points, sensor, cfg.branch_fov_rate, tuple(cfg.branch_fov))
+  enough = jnp.sum(sensor, axis=1, keepdims=True) >= MIN_BRANCH_POINTS
+  return jnp.where(enough, sensor, valid)

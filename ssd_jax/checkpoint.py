@@ -18,14 +18,14 @@ import jax
 import ml_collections
 import orbax.checkpoint as ocp
 
-from ssd_jax import distributed
+from ssd_jax import distributed, errors
 
 # Appended to a damaged step folder's name when training moves it aside: orbax reads
 # only integer step names, and nothing is deleted.
 DAMAGED_SUFFIX = '.damaged'
 
 
-class CheckpointError(ValueError):
+class CheckpointError(errors.UserError):
   """A checkpoint is missing, damaged (truncated or corrupt files) or unreadable."""
 
 

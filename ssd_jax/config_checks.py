@@ -9,7 +9,7 @@ import json
 import jax
 import ml_collections
 
-from ssd_jax import augment, grouping, network, objective, sensors
+from ssd_jax import augment, config_upgrade, errors, grouping, network, objective, sensors
 from ssd_jax.data import datasets
 
 AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
@@ -17,7 +17,7 @@ LR_SCHEDULES = ('constant', 'cosine')
 
 
 
-class ConfigError(ValueError):
+class ConfigError(errors.UserError):
   """A config value is out of range or inconsistent."""
 
 
@@ -68,7 +68,7 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
             f'model.{field} must be (low, high) degrees with 0 < low <= high, got {span}')
   require(m.branch_fov[1] <= 360, f'model.branch_fov must be within 360 degrees, got '
           f'{tuple(m.branch_fov)}')
-  if d.get('rescan_rate', 0.0) > 0:
+  if d.rescan_rate > 0:
     require(d.rescan_rate <= 1, f'data.rescan_rate must be in [0, 1], got {d.rescan_rate}')
     bad = set(d.rescan_sensors) - set(sensors.SENSORS)
     require(d.rescan_sensors and not bad, f'data.rescan_sensors: unknown {sorted(bad)} (or '
@@ -88,14 +88,14 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'got {config.inference.num_samples}')
   require(config.inference.draws >= 1,
           f'inference.draws must be >= 1, got {config.inference.draws}')
-  require(config.inference.get('voxel_size', 0.2) >= 0,
-          f'inference.voxel_size must be >= 0 metres, got {config.inference.get("voxel_size")}')
+  require(config.inference.voxel_size >= 0,
+          f'inference.voxel_size must be >= 0 metres, got {config.inference.voxel_size}')
   require(t.batch_size >= 1, f'train.batch_size must be >= 1, got {t.batch_size}')
   require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
-  require(t.get('lr_schedule', 'constant') in LR_SCHEDULES,   # runs from before it: constant
+  require(t.lr_schedule in LR_SCHEDULES,
           f'train.lr_schedule must be one of {LR_SCHEDULES}, got {t.lr_schedule!r}')
-  require(t.get('init_scope', 'descriptor') in ('descriptor', 'model'),
-          f"train.init_scope must be 'descriptor' or 'model', got {t.get('init_scope')!r}")
+  require(t.init_scope in ('descriptor', 'model'),
+          f"train.init_scope must be 'descriptor' or 'model', got {t.init_scope!r}")
   require(t.num_steps >= 1, f'train.num_steps must be >= 1, got {t.num_steps}')
   require(t.log_every >= 1 and t.checkpoint_every >= 1 and t.eval_every >= 1,
           'train.log_every, train.eval_every and train.checkpoint_every must be >= 1')
@@ -105,25 +105,19 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'run ({jax.process_count()} process(es); the batch is split across them)')
 
 
-ADDED_MODEL_KEYS = {'triplet_hinge': 'cluster', 'attention_normalization': 'softmax',
-                    'self_rotation': 'gaussian', 'orientation_head': 'mlp',
-                    'branch_dropout': 0.0, 'branch_crop_shift': 0.0, 'branch_crop_radius': 20.0,
-                    'branch_sensor_rate': 0.0, 'branch_beam_spacing': [0.7, 2.5],
-                    'branch_fov_rate': 0.0, 'branch_fov': [90.0, 180.0]}
 TRIPLET_ONLY_KEYS = ('triplet_hinge', 'attention_normalization')
 
 
 def check_resumable(config: ml_collections.ConfigDict, stored: dict, directory: str) -> None:
   """Refuse to continue a checkpoint written with a different model or seed."""
   current = json.loads(json.dumps(config.to_dict()))   # tuples -> lists, as stored
+  upgraded = config_upgrade.upgrade(stored).to_dict()
   for section in ('model',):
     for key, value in current[section].items():
-      if key not in stored.get(section, {}) and key in ADDED_MODEL_KEYS:
-        if key in TRIPLET_ONLY_KEYS and stored.get('objective') != 'triplet':
-          continue   # a triplet-only setting that the stored run never used
-        was = ADDED_MODEL_KEYS[key]
-      else:
-        was = stored.get(section, {}).get(key)
+      if (key in TRIPLET_ONLY_KEYS and key not in stored.get(section, {})
+          and stored.get('objective') != 'triplet'):
+        continue   # a triplet-only setting that the stored run never used
+      was = upgraded.get(section, {}).get(key)
       if was != value:
         raise ConfigError(
             f'{directory} holds a run with {section}.{key}={was!r}, '

@@ -33,7 +33,7 @@ import ml_collections
 import numpy as np
 from scipy import spatial
 
-from ssd_jax import grouping, network
+from ssd_jax import config_upgrade, errors, grouping, network, padding
 from ssd_jax.data.clean import check_cloud
 
 SEARCHES = ('kdtree', 'dense')
@@ -68,12 +68,11 @@ class Model:
   @classmethod
   def from_config(cls, config: ml_collections.ConfigDict, variables) -> 'Model':
     """The network of `config.model` with `variables`, describing as `config.inference`
-    says (runs from before that section describe as they trained)."""
-    settings = config.get('inference') or {}
-    num_samples = int(settings.get('num_samples', 0)) or int(config.model.num_samples)
+    says (a stored config: after `config_upgrade.upgrade`)."""
+    settings = config.inference
+    num_samples = int(settings.num_samples) or int(config.model.num_samples)
     return cls(network.create(config.model), variables, float(config.model.radius),
-               num_samples, draws=int(settings.get('draws', 1)),
-               voxel_size=float(settings.get('voxel_size', 0.2)))
+               num_samples, draws=int(settings.draws), voxel_size=float(settings.voxel_size))
 
 
 def checkpoint_directory(run_dir: str | os.PathLike) -> str:
@@ -95,7 +94,7 @@ def check_variables(variables, model_config, source: str) -> dict:
       np.shape(a) == b.shape for a, b in zip(jax.tree.leaves(variables),
                                              jax.tree.leaves(template))))
   if not same:
-    raise ValueError(f'{source}: not the weights of the network its config describes')
+    raise errors.UserError(f'{source}: not the weights of the network its config describes')
   return variables
 
 
@@ -112,7 +111,7 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
     raise FileNotFoundError(f'{directory}: holds no checkpoint')
   step = ckpt.latest_step() if step is None else step
   try:
-    config = ml_collections.ConfigDict(ckpt.restore_config(step))
+    config = config_upgrade.upgrade(ckpt.restore_config(step))
     state, _ = ckpt.restore(None, step)   # as stored: no optimizer template needed
   finally:
     ckpt.close()
@@ -120,9 +119,6 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
   model = Model.from_config(config, variables)
   return dataclasses.replace(model, step=int(step))
 
-
-def _bucket(n: int, smallest: int = 1024) -> int:
-  return max(smallest, 1 << (max(n, 1) - 1).bit_length())
 
 
 # XLA:CPU hands dots, elementwise ops and reductions to YNNPACK one by one with this
@@ -245,7 +241,7 @@ def _dense_first_in_order(model: Model, points: np.ndarray, keypoints: np.ndarra
                           order_seed) -> tuple[np.ndarray, np.ndarray]:
   """As `_first_in_order`, by `grouping.ball_query` in JAX on the shuffled cloud."""
   perm = _permutation(len(points), order_seed)
-  size = _bucket(len(points))
+  size = padding.bucket(len(points), 1024)
   padded = np.zeros((size, 3), np.float32)
   padded[:len(points)] = points[perm]
   valid = jnp.asarray(np.arange(size) < len(points))

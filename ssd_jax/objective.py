@@ -44,43 +44,6 @@ def _apply(model, variables, clusters, train):
   return model.apply(variables, clusters, train=False), variables['batch_stats']
 
 
-def resample_branch(key: jax.Array, points: jax.Array, valid: jax.Array,
-                    cfg: ml_collections.ConfigDict) -> jax.Array:
-  """The points one branch keeps, valid [B, N] -> [B, N], so that the two branches differ
-  as two scans of a place do:
-
-    * `cfg.branch_dropout` (max share dropped) and `cfg.branch_crop_shift` /
-      `cfg.branch_crop_radius` (metres; a crop around an offset sensor): another
-      sampling, another standpoint;
-    * `cfg.branch_sensor_rate` (chance per cloud) with `cfg.branch_beam_spacing`
-      (degrees): another, sparser beam pattern (`augment.beam_resample`);
-    * `cfg.branch_fov_rate` with `cfg.branch_fov` (degrees): a limited horizontal field
-      of view (`augment.fov_crop`).
-
-  A sensor change that would leave a cloud fewer than `MIN_BRANCH_POINTS` points is not
-  applied to it. Points are given in the unrotated frame, so the crop of PC2 is drawn in
-  PC1's frame: the same thing as a crop drawn after the rotation."""
-  k_drop, k_crop, k_beam, k_fov = jax.random.split(key, 4)
-  if cfg.get('branch_dropout', 0.0) > 0:
-    valid = augment.point_dropout(k_drop, valid, cfg.branch_dropout)
-  if cfg.get('branch_crop_shift', 0.0) > 0:
-    valid = augment.crop_around_offset(k_crop, points, valid, cfg.branch_crop_shift,
-                                       cfg.branch_crop_radius)
-  sensor = valid
-  if cfg.get('branch_sensor_rate', 0.0) > 0:
-    sensor = augment.beam_resample(k_beam, points, sensor, cfg.branch_sensor_rate,
-                                   tuple(cfg.branch_beam_spacing))
-  if cfg.get('branch_fov_rate', 0.0) > 0:
-    sensor = augment.fov_crop(k_fov, points, sensor, cfg.branch_fov_rate, tuple(cfg.branch_fov))
-  enough = jnp.sum(sensor, axis=1, keepdims=True) >= MIN_BRANCH_POINTS
-  return jnp.where(enough, sensor, valid)
-
-
-# Fewer points than this in a branch after a simulated sensor change keep the branch as it
-# was: a branch with a handful of clusters gives CF no rotation to recover.
-MIN_BRANCH_POINTS = 512
-
-
 def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,
                          points: jax.Array, valid: jax.Array,
                          cfg: ml_collections.ConfigDict, train: bool = True):
@@ -110,12 +73,12 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
     view1 = view2 = points
     seen1 = seen2 = valid
   pc2, r_gt = augment.self_rotate(k_rot, view2, cfg.rotation_sigma, cfg.rotation_clip,
-                                  cfg.get('self_rotation', 'gaussian'))
+                                  cfg.self_rotation)
   pc1 = augment.jitter(k_jit1, view1, cfg.jitter_sigma, cfg.jitter_clip)
   pc2 = augment.jitter(k_jit2, pc2, cfg.jitter_sigma, cfg.jitter_clip)
   # Each branch may see its own subset of the points (the paper: both see all).
-  valid1 = resample_branch(k_res1, view1, seen1, cfg)
-  valid2 = resample_branch(k_res2, view2, seen2, cfg)
+  valid1 = augment.resample_branch(k_res1, view1, seen1, cfg)
+  valid2 = augment.resample_branch(k_res2, view2, seen2, cfg)
   both = jnp.concatenate([pc1, pc2], 0)
   both_valid = jnp.concatenate([valid1, valid2], 0)
 

@@ -26,7 +26,7 @@ import jax
 import ml_collections
 import numpy as np
 
-from ssd_jax import inference, network
+from ssd_jax import config_upgrade, errors, inference, network
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / 'weights'
 SHIPPED = {
@@ -60,18 +60,18 @@ def load_export(path: str | os.PathLike) -> inference.Model:
   path = Path(path)
   try:
     record = json.loads((path / CONFIG_FILE).read_text())
-    config = ml_collections.ConfigDict(record['config'])
+    config = config_upgrade.upgrade(record['config'])
     template = network.variables_template(config.model)
   except (OSError, ValueError, KeyError, AttributeError) as e:
-    raise ValueError(f'{path / CONFIG_FILE}: not a readable model config ({e})') from None
+    raise errors.UserError(f'{path / CONFIG_FILE}: not a readable model config ({e})') from None
   # A numpy template: jnp.zeros would compile one fill kernel per weight shape.
   template = jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), template)
   try:
     variables = jax.device_put(
         flax.serialization.from_bytes(template, (path / WEIGHTS_FILE).read_bytes()))
   except Exception as e:  # pylint: disable=broad-except  (msgpack raises many kinds)
-    raise ValueError(f'{path / WEIGHTS_FILE}: damaged or not weights of this network '
-                     f'({type(e).__name__}: {e})') from None
+    raise errors.UserError(f'{path / WEIGHTS_FILE}: damaged or not weights of this network '
+                           f'({type(e).__name__}: {e})') from None
   model = inference.Model.from_config(config, variables)
   return dataclasses.replace(model, step=record.get('step'))
 
@@ -85,10 +85,8 @@ def export_run(run: str | os.PathLike, out: str | os.PathLike, step: int | None 
   from ssd_jax import checkpoint  # pylint: disable=g-import-not-at-top
   model = inference.load(run, step)
   ckpt = checkpoint.Checkpointer(inference.checkpoint_directory(run), asynchronous=False)
-  config = ml_collections.ConfigDict(ckpt.restore_config(model.step))
+  config = config_upgrade.upgrade(ckpt.restore_config(model.step))
   ckpt.close()
-  if 'inference' not in config:   # runs from before the section describe as they trained
-    config.inference = ml_collections.ConfigDict({'num_samples': 0, 'draws': 1})
   config.inference.num_samples = num_samples or config.inference.num_samples
   config.inference.draws = draws or config.inference.draws
   model = dataclasses.replace(inference.Model.from_config(config, model.variables),
@@ -109,7 +107,7 @@ def load(name_or_path: str | os.PathLike, step: int | None = None) -> inference.
     raise FileNotFoundError(f'the shipped model {name_or_path!r} is not in {path}')
   if is_export(path):
     if step is not None:
-      raise ValueError(f'{path} is an export of one step; --step applies to training runs')
+      raise errors.UserError(f'{path} is an export of one step; --step applies to training runs')
     return load_export(path)
   return inference.load(path, step)
 

@@ -61,7 +61,7 @@ def create_optimizer(config: ml_collections.ConfigDict) -> optax.GradientTransfo
   """Adam at train.learning_rate, constant (the paper) or cosine-decayed to 0 at
   train.num_steps (`train.lr_schedule`)."""
   t = config.train
-  if t.get('lr_schedule', 'constant') == 'cosine':
+  if t.lr_schedule == 'cosine':
     # At a constant rate and batch 2 the weights keep wandering: registration success moved
     # by 2-4 points between checkpoints 1,000 steps apart. Decayed, the last one settles.
     return optax.adam(optax.cosine_decay_schedule(t.learning_rate, t.num_steps))
@@ -230,7 +230,7 @@ def initialize_from(state: TrainState, source: str,
   `config.train.init_scope` says which: 'descriptor' is 3DFeat-Net's stage hand-over (the
   detector keeps its fresh initialisation); 'model' copies every weight, to fine-tune a
   trained model (e.g. the shipped `ours` on a user's own sensor)."""
-  scope = config.train.get('init_scope', 'descriptor')
+  scope = config.train.init_scope
   try:
     src = pretrained.load(source).variables
   except (FileNotFoundError, ValueError) as e:
@@ -285,7 +285,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
                      min_points=config.data.min_points)
   if config.objective == 'triplet':
     dataset = triplet_dataset(config)
-  elif config.data.get('rescan_rate', 0.0) > 0:
+  elif config.data.rescan_rate > 0:
     d = config.data
     dataset = datasets.RescanPairDataset.from_source(
         d.path, rate=d.rescan_rate, sensors=tuple(d.rescan_sensors),
@@ -309,7 +309,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
     logging.info('Resumed from step %d in %s', int(state.step), ckpt.directory)
   elif t_cfg.get('init_from'):
     state = replicate(initialize_from(jax.device_get(state), t_cfg.init_from, config), mesh)
-    logging.info('%s initialised from %s', t_cfg.get('init_scope', 'descriptor'), t_cfg.init_from)
+    logging.info('%s initialised from %s', t_cfg.init_scope, t_cfg.init_from)
   start = int(state.step)
   writer = MetricsWriter(os.path.join(workdir, 'metrics.jsonl'), start, distributed.is_main())
   step_fn = jit_train_step(config, mesh)

@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from ssd_jax import pretrained
-from ssd_jax.data import benchmarks, io
+from ssd_jax.data import io, registration_sets
 from ssd_jax.registration import metrics, pipeline
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_path):
   out = tmp_path / 'mine'
@@ -34,12 +35,13 @@ def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_pat
   moved = jax.tree.map(lambda a, b: float(np.abs(np.asarray(a) - np.asarray(b)).max()),
                        adapted.variables['params'], ours.variables['params'])
   assert 0 < max(jax.tree.leaves(moved)) < 0.05
-  pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
+  pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
   reg, _, _ = pipeline.register(io.read_cloud(pair.cloud1), io.read_cloud(pair.cloud2), 'iss',
                                 'learned', adapted)
   assert metrics.registration_errors(pair.transform, reg.transform)['success']
 
 
+@pytest.mark.multiprocess
 def test_adapt_refuses_a_missing_folder(tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.adapt', f'--scans={tmp_path / "no"}',
                         f'--out={tmp_path / "o"}'], cwd=ROOT, capture_output=True, text=True,

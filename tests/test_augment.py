@@ -1,12 +1,12 @@
-"""Self-rotation and branch resampling (ssd_jax.augment, objective.resample_branch)."""
+"""Self-rotation and branch resampling (ssd_jax.augment, augment.resample_branch)."""
 
 import jax
 import jax.numpy as jnp
-import ml_collections
 import numpy as np
 import pytest
 
-from ssd_jax import augment, objective
+from ssd_jax import augment
+from ssd_jax.configs import paper
 
 
 def test_uniform_self_rotation_covers_the_circle_and_gaussian_stays_clipped():
@@ -43,8 +43,8 @@ def test_offset_crop_keeps_a_disk_around_a_shifted_sensor():
 
 
 def _model_cfg(**overrides):
-  cfg = ml_collections.ConfigDict({'branch_dropout': 0.0, 'branch_crop_shift': 0.0,
-                                   'branch_crop_radius': 20.0})
+  """The paper config's model section (every branch change off) with `overrides`."""
+  cfg = paper.get_config().model
   cfg.update(overrides)
   return cfg
 
@@ -52,15 +52,15 @@ def _model_cfg(**overrides):
 def test_resampled_branches_are_two_different_samplings():
   pts = jnp.asarray(np.random.default_rng(0).uniform(-15, 15, (2, 3000, 3)), jnp.float32)
   valid = jnp.ones((2, 3000), bool)
-  off = objective.resample_branch(jax.random.key(0), pts, valid, _model_cfg())
+  off = augment.resample_branch(jax.random.key(0), pts, valid, _model_cfg())
   assert bool(off.all())                                  # the paper: every point, both
   cfg = _model_cfg(branch_dropout=0.5, branch_crop_shift=4.0, branch_crop_radius=14.0)
-  v1 = np.asarray(objective.resample_branch(jax.random.key(1), pts, valid, cfg))
-  v2 = np.asarray(objective.resample_branch(jax.random.key(2), pts, valid, cfg))
+  v1 = np.asarray(augment.resample_branch(jax.random.key(1), pts, valid, cfg))
+  v2 = np.asarray(augment.resample_branch(jax.random.key(2), pts, valid, cfg))
   both = (v1 & v2).sum(1)
   assert np.all(both > 100) and np.all(both < 0.8 * np.minimum(v1.sum(1), v2.sum(1)))
   np.testing.assert_array_equal(
-      v1, objective.resample_branch(jax.random.key(1), pts, valid, cfg))
+      v1, augment.resample_branch(jax.random.key(1), pts, valid, cfg))
 
 
 def _spherical_points(rng, b, n, max_range=30.0):
@@ -102,13 +102,13 @@ def test_sensor_change_that_leaves_too_few_points_is_not_applied():
   pts = _spherical_points(np.random.default_rng(2), 2, 1000)
   valid = jnp.ones((2, 1000), bool)
   # 1,000 points through a 90 degree sector of 2-degree rings keep ~50: fewer than
-  # objective.MIN_BRANCH_POINTS, so the branch stays as it was.
+  # augment.MIN_BRANCH_POINTS, so the branch stays as it was.
   cfg = _model_cfg(branch_sensor_rate=1.0, branch_beam_spacing=(2.0, 2.0), branch_fov_rate=1.0,
                    branch_fov=(90.0, 90.0))
-  out = objective.resample_branch(jax.random.key(0), pts, valid, cfg)
+  out = augment.resample_branch(jax.random.key(0), pts, valid, cfg)
   assert bool(out.all())
   big = _spherical_points(np.random.default_rng(2), 2, 8000)
-  out = np.asarray(objective.resample_branch(jax.random.key(0), big, jnp.ones((2, 8000), bool),
+  out = np.asarray(augment.resample_branch(jax.random.key(0), big, jnp.ones((2, 8000), bool),
                                              _model_cfg(branch_sensor_rate=1.0,
                                                         branch_beam_spacing=(2.0, 2.0))))
-  assert np.all((out.sum(1) >= objective.MIN_BRANCH_POINTS) & (out.mean(1) < 0.3))
+  assert np.all((out.sum(1) >= augment.MIN_BRANCH_POINTS) & (out.mean(1) < 0.3))

@@ -10,6 +10,7 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_train_step_benchmark_times_a_compiled_step():
   """One config's row, as the parent process collects it: a positive step time and the
@@ -26,6 +27,7 @@ def test_train_step_benchmark_times_a_compiled_step():
   assert 0.8 < row['xla_gflop'] / row['train_gflop'] < 1.2
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_registration_benchmark_prints_every_regime_with_the_dense_one(synthetic_root):
   """The registration benchmark's table has the cold, warm, batch and dense rows of a

@@ -49,6 +49,8 @@ def _damage(step_dir, kind):
   target.write_bytes(target.read_bytes()[:40])
 
 
+@pytest.mark.real_data
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_damaged_newest_checkpoint_falls_back_or_is_named(tiny_config, tmp_path):
   tiny_config.data.path = str(shared_path('kitti_object_velodyne'))

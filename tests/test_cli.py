@@ -34,6 +34,8 @@ def test_config_paths_resolve_to_the_project_from_anywhere(tmp_path, monkeypatch
   assert out[:2] + out[3:] == args[:2] + args[3:]
 
 
+@pytest.mark.real_data
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_console_scripts_register_and_train_outside_the_repository(tmp_path):
   """`ssd-jax-register` with the shipped model and `ssd-jax-train` with a project config
@@ -55,6 +57,7 @@ def test_console_scripts_register_and_train_outside_the_repository(tmp_path):
   assert (tmp_path / 'run' / 'checkpoints' / '2').is_dir()
 
 
+@pytest.mark.multiprocess
 def test_cli_reports_bad_config_without_traceback(tmp_path):
   out = subprocess.run(
       [sys.executable, '-m', 'experiments.train', '--config=configs/cpu_small.py',
@@ -66,6 +69,7 @@ def test_cli_reports_bad_config_without_traceback(tmp_path):
   assert 'Traceback' not in out.stderr
 
 
+@pytest.mark.multiprocess
 def test_cli_mistakes_end_in_one_line(tmp_path):
   (tmp_path / 'a_file').write_text('')
   data = f'--config.data.path={tmp_path}'
@@ -105,6 +109,7 @@ cli.run(main, fast_exit=True)
 """
 
 
+@pytest.mark.multiprocess
 def test_fast_exit_keeps_atexit_hooks_and_buffered_output(tmp_path):
   """`cli.run(fast_exit=True)` skips the interpreter's teardown but still runs the
   atexit hooks and flushes C's stdout buffer (a pipe here, so fully buffered); a failing

@@ -5,7 +5,8 @@ import json
 
 import pytest
 
-from ssd_jax import config_checks
+from ssd_jax import config_checks, config_upgrade
+from ssd_jax.configs import paper
 
 
 def test_config_errors_name_the_value(tiny_config):
@@ -63,8 +64,9 @@ def test_batch_must_split_over_devices(tiny_config):
 def test_runs_from_before_a_model_key_existed_resume_with_its_old_value(tiny_config):
   tiny_config.objective = 'triplet'
   stored = json.loads(json.dumps(tiny_config.to_dict()))
-  for key in config_checks.ADDED_MODEL_KEYS:
-    del stored['model'][key]
+  for section, key in config_upgrade.RUN_KEYS:
+    if section == 'model':
+      del stored['model'][key]
   tiny_config.model.triplet_hinge = 'cluster'
   config_checks.check_resumable(tiny_config, stored, 'old_run')      # what old runs used: accepted
   tiny_config.model.triplet_hinge = 'cloud'
@@ -76,3 +78,21 @@ def test_runs_from_before_a_model_key_existed_resume_with_its_old_value(tiny_con
   tiny_config.model.self_rotation = 'uniform'
   with pytest.raises(config_checks.ConfigError, match="model.self_rotation='gaussian'"):
     config_checks.check_resumable(tiny_config, stored, 'old_run')
+
+
+def test_config_upgrade_fills_only_missing_keys_with_what_old_runs_used():
+  today = paper.get_config()
+  for section, key in config_upgrade.RUN_KEYS:      # every key the upgrade knows exists today
+    assert key in today[section], (section, key)
+  assert config_upgrade.upgrade(today).to_dict() == json.loads(json.dumps(today.to_dict()))
+  old = json.loads(json.dumps(today.to_dict()))
+  del old['inference'], old['model']['self_rotation'], old['train']['lr_schedule']
+  old['model']['orientation_head'] = 'equivariant'
+  up = config_upgrade.upgrade(old)
+  assert up.model.self_rotation == 'gaussian' and up.train.lr_schedule == 'constant'
+  assert up.model.orientation_head == 'equivariant'            # stored values stay
+  assert up.inference.to_dict() == {'num_samples': 0, 'draws': 1, 'voxel_size': 0.2}
+  old_set = {'test_kitti': {'num_scenes': 1}, 'test_oxford': {'num_scenes': 1}}
+  assert config_upgrade.upgrade_synthetic(old_set) == {
+      'test_kitti': {'num_scenes': 1, 'random_yaw': False},
+      'test_oxford': {'num_scenes': 1, 'sensor': 'spinning', 'line_spacing': 0.2}}

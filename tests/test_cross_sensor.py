@@ -12,7 +12,7 @@ from scipy import spatial
 from ssd_jax import sensors
 from ssd_jax.configs import cross_sensor as cross_sensor_eval
 from ssd_jax.configs import cross_sensor_data
-from ssd_jax.data import benchmarks, io, rescan
+from ssd_jax.data import io, registration_sets, rescan
 from ssd_jax.evaluation import evaluators, feature_store
 from ssd_jax.synthetic import cross_sensor, dataset
 from tests.conftest import shared_path, tiny_synthetic_config
@@ -45,8 +45,8 @@ def _overlap(pair):
 
 
 def test_synthetic_pairs_have_their_units_distances_and_exact_poses(tiny_set):
-  pairs = benchmarks.read_registration_set(tiny_set)
-  info = benchmarks.read_pair_info(tiny_set)
+  pairs = registration_sets.read_registration_set(tiny_set)
+  info = registration_sets.read_pair_info(tiny_set)
   assert len(pairs) == 4 and len(info) == 4
   bins = sorted(((info[p.idx1, p.idx2]['sensor2'], info[p.idx1, p.idx2]['distance_m'] >= 10)
                  for p in pairs))
@@ -58,7 +58,7 @@ def test_synthetic_pairs_have_their_units_distances_and_exact_poses(tiny_set):
     assert _overlap(pair) > 0.1, meta         # the true pose lays one scan on the other
     wrong = pair.transform.copy()
     wrong[:3, 3] += 2.0
-    assert _overlap(benchmarks.RegistrationPair('', 0, 0, pair.cloud1, pair.cloud2, wrong)) \
+    assert _overlap(registration_sets.RegistrationPair('', 0, 0, pair.cloud1, pair.cloud2, wrong)) \
         < 0.5 * _overlap(pair)
     c2 = io.read_cloud(pair.cloud2)
     if meta['sensor2'] == 'front120':   # a 120-degree sector in its own frame
@@ -83,11 +83,12 @@ def test_bad_cross_sensor_configs_are_refused(field, value, message):
     cross_sensor.check_config(config)
 
 
+@pytest.mark.real_data
 def test_real_rescan_by_another_unit(tmp_path):
   source = shared_path('example', 'kitti_00_001554.bin')
   rows = rescan.make_cross_sensor_set([source], tmp_path, ('vlp16',), ((5.0, 10.0),))
   assert len(rows) == 1 and 5 <= rows[0]['distance_m'] < 10
-  pair = benchmarks.read_registration_set(tmp_path)[0]
+  pair = registration_sets.read_registration_set(tmp_path)[0]
   c2 = io.read_cloud(pair.cloud2)
   # Cloud 2 is in the virtual unit's frame: its points lie near the 16 beams (the voxel
   # grid and noise blur them a little), where the source scan's elevations are spread.
@@ -96,15 +97,15 @@ def test_real_rescan_by_another_unit(tmp_path):
       - sensors.get('vlp16').elevations()[None]), axis=1) < 0.4)
   assert near(c2) > 0.8 > 0.5 > near(io.read_cloud(source))
   assert _overlap(pair) > 0.3
-  assert benchmarks.read_pair_info(tmp_path)[pair.idx1, pair.idx2]['sensor2'] == 'vlp16'
+  assert registration_sets.read_pair_info(tmp_path)[pair.idx1, pair.idx2]['sensor2'] == 'vlp16'
 
 
 def test_pair_info_errors_name_the_file(tmp_path):
   with pytest.raises(io.CloudFileError, match='pairs.tsv: missing'):
-    benchmarks.read_pair_info(tmp_path)
+    registration_sets.read_pair_info(tmp_path)
   (tmp_path / 'pairs.tsv').write_text('idx1\tidx2\n')
   with pytest.raises(io.CloudFileError, match='the header must be'):
-    benchmarks.read_pair_info(tmp_path)
+    registration_sets.read_pair_info(tmp_path)
 
 
 @pytest.mark.slow
@@ -115,19 +116,19 @@ def test_cross_sensor_evaluation_writes_the_matrix(tiny_set, tmp_path):
   del config.evals['real']
   config.evals.synthetic.dataset = 'synthetic'
   config.evals.synthetic.distance_bins = ((5.0, 10.0), (10.0, 20.0))
-  config.evals.synthetic.rows = ('iss+fpfh', 'auto+fpfh+upright+verify', 'open3d')
+  config.evals.synthetic.rows = ('iss+fpfh', 'auto+fpfh+upright+verify+bev', 'open3d', 'bev')
   _, text = evaluators.evaluate(config, tmp_path, log=lambda s: None)
   assert '| method | all | vlp16 | front120 | 5-10 m | 10-20 m |' in text
-  assert 'Open3D ISS + FPFH (paper searches)' in text
-  assert 'farthest-point kpt + FPFH desc, upright RANSAC, verified' in text
+  assert 'Open3D ISS + FPFH (paper searches)' in text and 'BEV search alone, verified' in text
+  assert 'farthest-point kpt + FPFH desc, upright RANSAC, verified with BEV search' in text
   with open(tmp_path / 'synthetic.csv') as f:
     rows = list(csv.DictReader(f))
-  # 3 methods x (2 units + all) x (2 bins + all) cells, each with its pair count.
-  assert len(rows) == 27 and {r['pairs'] for r in rows if r['unit'] != 'all'
+  # 4 methods x (2 units + all) x (2 bins + all) cells, each with its pair count.
+  assert len(rows) == 36 and {r['pairs'] for r in rows if r['unit'] != 'all'
                               and r['distance'] != 'all'} == {'1'}
   assert all(0 <= float(r['success (%)']) <= 100 for r in rows)
   lines = (tmp_path / 'synthetic_pairs.jsonl').read_text().splitlines()
-  assert len(lines) == 12 and '"row": "open3d"' in lines[-1]
+  assert len(lines) == 16 and '"row": "bev"' in lines[-1]
 
 
 def test_unlabeled_scans_of_one_unit(tmp_path):
@@ -141,6 +142,7 @@ def test_unlabeled_scans_of_one_unit(tmp_path):
   assert near.mean() > 0.8 and np.abs(el).max() < 16   # a VLP-16's rings, nothing above
 
 
+@pytest.mark.multiprocess
 def test_make_real_pairs_names_a_bad_unit(tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.make_real_pairs', '--sensor=vlp32',
                         f'--out={tmp_path}'], cwd=ROOT, capture_output=True, text=True,
@@ -155,6 +157,9 @@ def test_row_names_parse_into_keypoints_descriptor_estimator_and_verification():
   assert feature_store.row_verifies('auto+ours+upright+verify')
   assert not feature_store.row_verifies('iss+fpfh') and feature_store.row_estimator('iss+fpfh') == 'rigid'
   assert feature_store.row_label('auto+fpfh+rigid+verify') == 'farthest-point kpt + FPFH desc, verified'
-  for bad in ('iss', 'iss+fpfh+affine', 'iss+fpfh+upright+check', 'iss++upright'):
+  assert feature_store.row_bev_candidates('auto+ours+upright+verify+bev') == 5
+  assert feature_store.row_bev_candidates('auto+ours+upright+verify') == 0
+  for bad in ('iss', 'iss+fpfh+affine', 'iss+fpfh+upright+check', 'iss++upright',
+              'auto+fpfh+rigid+verify+bev', 'auto+fpfh+upright+bev'):
     with pytest.raises(ValueError, match='must be "keypoints\\+descriptor\\[\\+estimator'):
       feature_store.split_row(bad)

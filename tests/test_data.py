@@ -7,6 +7,7 @@ from ssd_jax.data import clean, datasets, io
 from tests.conftest import shared_path
 
 
+@pytest.mark.real_data
 def test_reads_real_3dfeatnet_and_kitti_formats():
   oxford = shared_path('example', 'oxford_270.bin')
   kitti = shared_path('kitti_object_velodyne', '000000.bin')
@@ -59,6 +60,7 @@ def _real_layouts():
   return out
 
 
+@pytest.mark.real_data
 def test_every_bin_layout_is_detected_and_reads_when_named(tmp_path):
   for fmt, rows in _real_layouts().items():
     path = tmp_path / f'{fmt}.bin'
@@ -70,6 +72,7 @@ def test_every_bin_layout_is_detected_and_reads_when_named(tmp_path):
       np.testing.assert_array_equal(xyz, rows[:, :3])
 
 
+@pytest.mark.real_data
 def test_bin_layouts_that_used_to_be_guessed_wrong(tmp_path):
   kitti = np.fromfile(shared_path('kitti_object_velodyne', '000000.bin'), '<f4').reshape(-1, 4)
   # Intensity in [0, 255] that is not an integer: still xyzi, not 4/3 as many xyz rows.
@@ -111,6 +114,7 @@ def test_bin_layouts_that_used_to_be_guessed_wrong(tmp_path):
     io.read_cloud(tmp_path / 'noise.bin')
 
 
+@pytest.mark.real_data
 def test_truncated_real_file_is_reported(tmp_path):
   data = shared_path('example', 'oxford_270.bin').read_bytes()
   (tmp_path / 'cut.bin').write_bytes(data[:-4])
@@ -179,6 +183,7 @@ def test_crop_and_subsample_pad_by_repetition():
   assert len({tuple(r) for r in many}) == 40
 
 
+@pytest.mark.real_data
 def test_dataset_batches_are_a_function_of_seed_and_step():
   ds = datasets.CloudDataset.from_source(shared_path('kitti_object_velodyne'))
   assert len(ds) == 6

@@ -137,6 +137,7 @@ def _one_error_line(text: str) -> str:
   return errors[0]
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_a_process_that_never_joins_ends_the_run_in_one_line(synthetic_root, tmp_path):
   port = _free_port()
@@ -151,6 +152,7 @@ def test_a_process_that_never_joins_ends_the_run_in_one_line(synthetic_root, tmp
   assert time.monotonic() - t0 < 120
 
 
+@pytest.mark.multiprocess
 @pytest.mark.parametrize('args, message', [
     (['--num_processes=2', '--process_id=2'], '--process_id=2: must be in [0, 2)'),
     (['--num_processes=0'], '--num_processes=0: must be at least 1'),
@@ -163,6 +165,7 @@ def test_wrong_process_settings_are_one_line(args, message, tmp_path):
   assert _one_error_line(proc.stderr) == f'error: {message}'
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_a_killed_process_stops_the_run_and_the_rerun_resumes(synthetic_root, tmp_path):
   args = TINY_TRAIN + [f'--config.data.path={synthetic_root / "train"}', f'--workdir={tmp_path}']

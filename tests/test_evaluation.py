@@ -12,10 +12,10 @@ import jax
 import numpy as np
 import pytest
 
-from ssd_jax import geometry, inference, pretrained, train
+from ssd_jax import errors, geometry, inference, pretrained, train
 from ssd_jax.configs import cpu_small
 from ssd_jax.configs import registration as registration_config
-from ssd_jax.data import benchmarks, clusters, io
+from ssd_jax.data import clusters, io, registration_sets
 from ssd_jax.evaluation import (descriptor_matching, evaluators, feature_store, fingerprint,
                                 learning_curve, orientation, precision, registration,
                                 repeatability)
@@ -155,6 +155,7 @@ def _csv(path):
     return list(csv.reader(f))
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path):
   out = tmp_path / 'out'
@@ -179,7 +180,7 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   assert '[1/8] Table I' in run.stderr and '[8/8] Figures' in run.stderr
 
   # The table's numbers are recomputed: redo ISS + FPFH on the same two pairs here.
-  pairs = benchmarks.read_registration_set(synthetic_root / 'test_oxford')[:2]
+  pairs = registration_sets.read_registration_set(synthetic_root / 'test_oxford')[:2]
   store = feature_store.FeatureStore({}, seed=0, fpfh_max_nn=50)
   res = registration.register_pairs(pairs, ['iss+fpfh'], store, progress=False)['iss+fpfh']
   table = {r[0]: r for r in _csv(out / 'table1_oxford.csv')}
@@ -211,6 +212,7 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   assert dm['3DFeat-Net'][1] == 'missing'
 
 
+@pytest.mark.multiprocess
 def test_reproduce_says_what_it_cannot_do(tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.evaluate',
                         '--config=configs/reproduce.py', f'--config.data_root={tmp_path}',
@@ -220,6 +222,7 @@ def test_reproduce_says_what_it_cannot_do(tmp_path):
   assert 'nothing to evaluate under' in run.stderr and 'test_oxford' in run.stderr
 
 
+@pytest.mark.multiprocess
 def test_evaluate_names_a_bad_type_and_missing_data(tmp_path):
   common = [sys.executable, '-m', 'experiments.evaluate', '--config=configs/registration.py',
             f'--workdir={tmp_path / "out"}']
@@ -237,6 +240,7 @@ def test_evaluate_names_a_bad_type_and_missing_data(tmp_path):
     evaluators.evaluate(empty, tmp_path / 'out')
 
 
+@pytest.mark.multiprocess
 def test_plot_keypoints_cli(synthetic_root, tmp_path):
   cloud = synthetic_root / 'test_kitti' / '00' / '000000.bin'
   run = subprocess.run([sys.executable, '-m', 'experiments.plot_keypoints', f'--cloud={cloud}',
@@ -257,6 +261,7 @@ def test_plot_keypoints_cli(synthetic_root, tmp_path):
   assert int(run.stdout.split('learned: ')[1].split()[0]) >= 64
 
 
+@pytest.mark.multiprocess
 def test_descriptor_matching_cli_names_a_truncated_cluster(tmp_path):
   good = np.zeros((10, 6), np.float32)
   good[:, :3] = np.random.default_rng(0).normal(size=(10, 3))
@@ -276,9 +281,10 @@ def test_descriptor_matching_cli_names_a_truncated_cluster(tmp_path):
 
 # ---- learning curve ------------------------------------------------------------------------
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_learning_curve_rows_resume_and_cli(synthetic_root, tiny_checkpoint, tmp_path):
-  pairs = benchmarks.read_registration_set(synthetic_root / 'test_oxford')[:2]
+  pairs = registration_sets.read_registration_set(synthetic_root / 'test_oxford')[:2]
   csv_path = tmp_path / 'curve.csv'
   loaded = []
 
@@ -358,3 +364,26 @@ def test_fingerprints_tell_stages_apart(tmp_path):
   env = fingerprint.environment()
   assert env['jax'] != 'not installed' and 'cores' in env['cpu']
   assert '| jax |' in fingerprint.markdown({'keypoints: iss': 'abc'}, env)
+
+
+# ml_collections loads the --config file with importlib's deprecated load_module.
+@pytest.mark.filterwarnings('ignore:the load_module:DeprecationWarning')
+@pytest.mark.parametrize('error, reported', [
+    (errors.UserError('evals.x.dataset: no registration set at /nope'), True),
+    (ValueError('operands could not be broadcast together'), False),   # a bug
+])
+def test_evaluate_reports_user_errors_in_one_line_and_keeps_a_bugs_traceback(
+    monkeypatch, tmp_path, error, reported):
+  from experiments import evaluate   # pylint: disable=g-import-not-at-top  (its absl flags)
+  evaluate.FLAGS(['evaluate', f'--workdir={tmp_path}'])
+  monkeypatch.setattr(evaluate.cli, 'initialize_distributed', lambda: None)
+
+  def fail(*args):
+    raise error
+  monkeypatch.setattr(evaluators, 'evaluate', fail)
+  if reported:
+    with pytest.raises(SystemExit, match=f'^error: {error}$'):
+      evaluate.main(['evaluate'])
+  else:
+    with pytest.raises(ValueError, match='could not be broadcast'):
+      evaluate.main(['evaluate'])

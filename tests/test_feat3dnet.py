@@ -262,6 +262,7 @@ def test_turn_clouds_turns_each_cloud_about_z_within_range():
   np.testing.assert_array_equal(turned, triplets.turn_clouds(pts, np.radians(20.0), seed=1))
 
 
+@pytest.mark.multiprocess
 def test_triplet_diagnostics_cli_names_a_missing_checkpoint(synthetic_root, tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.triplet_diagnostics',
                         '--config=configs/feat3dnet_small.py:pretrain',

@@ -33,6 +33,7 @@ def _cloud():
   return np.random.default_rng(1).uniform(-8, 8, (1500, 3)).astype(np.float32)
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_export_loads_back_identical_and_small(tiny_run, tmp_path):
   out = tmp_path / 'export'

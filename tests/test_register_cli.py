@@ -12,7 +12,7 @@ import open3d as o3d
 import pytest
 
 from ssd_jax import geometry, pretrained
-from ssd_jax.data import benchmarks, io
+from ssd_jax.data import io, registration_sets
 from ssd_jax.registration import metrics
 from tests.conftest import shared_path
 
@@ -30,19 +30,20 @@ def _run(*args):
 
 
 def test_readers_of_both_layouts(tiny_set):
-  kitti = benchmarks.read_registration_set(tiny_set / 'test_kitti')
-  single = benchmarks.read_registration_set(tiny_set / 'test_kitti' / '00')
-  oxford = benchmarks.read_registration_set(tiny_set / 'test_oxford')
+  kitti = registration_sets.read_registration_set(tiny_set / 'test_kitti')
+  single = registration_sets.read_registration_set(tiny_set / 'test_kitti' / '00')
+  oxford = registration_sets.read_registration_set(tiny_set / 'test_oxford')
   assert len(kitti) == len(single) >= 5 and len(oxford) >= 5
   assert kitti[0].cloud1.name == f'{kitti[0].idx1:06d}.bin' and kitti[0].sequence == '00'
   assert oxford[0].cloud1.parent.name == 'test_models'
   with pytest.raises(io.CloudFileError, match='no groundtruths.txt here'):
-    benchmarks.read_registration_set(tiny_set / 'train')
+    registration_sets.read_registration_set(tiny_set / 'train')
 
 
+@pytest.mark.multiprocess
 def test_register_cli_fpfh_on_a_synthetic_pair(tiny_set, tmp_path):
   folder = tiny_set / 'test_kitti' / '00'
-  pair = benchmarks.read_registration_set(folder)[0]
+  pair = registration_sets.read_registration_set(folder)[0]
   out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
              f'--groundtruth={folder / "groundtruths.txt"}', f'--json={tmp_path / "new" / "r.json"}',
              f'--plot={tmp_path / "r.png"}', '--fpfh_max_nn=200')
@@ -56,6 +57,7 @@ def test_register_cli_fpfh_on_a_synthetic_pair(tiny_set, tmp_path):
   assert 'vs ground truth: RTE' in out.stdout
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_register_cli_errors(tiny_set, tmp_path):
   cloud = tiny_set / 'test_kitti' / '00' / '000000.bin'
@@ -78,13 +80,20 @@ def test_register_cli_errors(tiny_set, tmp_path):
   assert '==' not in out.stdout and 'Traceback' not in out.stderr
   out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={cloud}', '--format=xyzq')
   assert out.returncode != 0 and 'Traceback' not in out.stderr
+  # The BEV search's poses turn about z only: asked for with rigid RANSAC, it is refused.
+  out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={cloud}', '--ransac=rigid',
+             '--bev=3')
+  assert out.returncode != 0 and out.stderr.strip().splitlines()[-1] == (
+      'error: --bev needs --ransac=upright and --verify > 0 (its poses turn about z only, and '
+      "are checked with RANSAC's)")
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
   """No --checkpoint: the shipped `ours` model describes, and the pair registers."""
   folder = tiny_set / 'test_kitti' / '00'
-  pair = benchmarks.read_registration_set(folder)[0]
+  pair = registration_sets.read_registration_set(folder)[0]
   out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
              '--descriptor=learned', f'--groundtruth={folder / "groundtruths.txt"}',
              f'--json={tmp_path / "r.json"}')
@@ -102,6 +111,7 @@ def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
   assert one['draws'] == 1 and one['errors']['success'] and one['T_12'] != result['T_12']
 
 
+@pytest.mark.multiprocess
 def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):
   out = _run('experiments.evaluate', f'--workdir={tmp_path}',
              f'--config.evals.registration.dataset={tiny_set / "test_kitti"}',
@@ -117,6 +127,8 @@ def test_evaluate_registration_rows_and_missing_models(tiny_set, tmp_path):
   assert (tmp_path / 'registration.csv').read_text().count('\n') == 3
 
 
+@pytest.mark.real_data
+@pytest.mark.multiprocess
 @pytest.mark.parametrize('names,descriptor', [
     (('oxford_270', 'oxford_456'), 'learned'), (('kitti_00_001554', 'kitti_00_004534'), 'learned'),
     (('kitti_00_001554', 'kitti_00_004534'), 'fpfh')])
@@ -155,11 +167,12 @@ print(json.dumps(results))
 '''
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set, tmp_path):
   """A table of damaged, odd and far-away files through `register` (one process): each
   ends in a one-line error or in a correct transform, never in exit 0 with a wrong one."""
-  pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
+  pair = registration_sets.read_registration_set(tiny_set / 'test_kitti')[0]
   c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
   rng = np.random.default_rng(0)
   utm = np.array([4.5e5, 5.4e6, 30.0])
@@ -221,9 +234,10 @@ def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set
     assert np.median(err) < 0.5 and err.max() < 2.0, (name, np.median(err), err.max())
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_the_compilation_cache_keeps_kernels_and_changes_no_result(tiny_set, tmp_path):
-  pair = benchmarks.read_registration_set(tiny_set / 'test_kitti' / '00')[0]
+  pair = registration_sets.read_registration_set(tiny_set / 'test_kitti' / '00')[0]
   args = ['experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
           '--descriptor=learned']
   results = []
@@ -242,6 +256,7 @@ def test_the_compilation_cache_keeps_kernels_and_changes_no_result(tiny_set, tmp
     np.testing.assert_allclose(r['T_12'], results[0]['T_12'], rtol=0, atol=1e-9)
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
   folder = tiny_set / 'test_kitti' / '00'
@@ -261,7 +276,7 @@ def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
   np.testing.assert_allclose(poses[0], np.eye(4)[:3])
   t01 = np.array([float(rows[0][f'T_12[{i}][{j}]']) for i in range(4) for j in range(4)])
   np.testing.assert_allclose(poses[1], t01.reshape(4, 4)[:3])   # P_1 = P_0 T_01
-  listed = benchmarks.read_registration_set(folder)[0]            # the ground truth lists it
+  listed = registration_sets.read_registration_set(folder)[0]            # the ground truth lists it
   assert rows[0]['success'] == ('True' if listed.idx2 == 1 else '')
   assert (tmp_path / 'seq' / 'trajectory.png').stat().st_size > 10_000
   # A pair list: paths relative to the list; a malformed line is one line of error.
@@ -279,9 +294,10 @@ def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
       f"error: {tmp_path / 'bad.txt'}, line 1: expected \"cloud1 cloud2\", got 'a.bin b.bin c.bin'")
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_las_and_laz_register_like_the_same_points_in_ply(tiny_set, tmp_path):
-  pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
+  pair = registration_sets.read_registration_set(tiny_set / 'test_kitti')[0]
   offset = np.array([500_000.0, 4_000_000.0, 100.0])   # UTM-like map coordinates
   for k, cloud in enumerate((pair.cloud1, pair.cloud2)):
     pts = io.read_cloud(cloud).astype(np.float64) + offset
@@ -312,9 +328,10 @@ def test_las_and_laz_register_like_the_same_points_in_ply(tiny_set, tmp_path):
   assert 0 < r['fitness'] <= 1 and 0 < r['inlier_rmse'] < 1 and r['correspondence_set_size'] >= 3
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_register_puts_dense_clouds_on_the_grid_and_voxel_0_keeps_every_point(tiny_set, tmp_path):
-  pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
+  pair = registration_sets.read_registration_set(tiny_set / 'test_kitti')[0]
   rng = np.random.default_rng(0)
   paths = []
   for n, path in enumerate((pair.cloud1, pair.cloud2)):
@@ -335,8 +352,9 @@ def test_register_puts_dense_clouds_on_the_grid_and_voxel_0_keeps_every_point(ti
       assert lines == [f'voxel: dense0.bin: {counts[0]:,} -> {result["points"][0]:,} points on '
                        'the 0.2 m grid'], out.stdout
       assert result['voxel'] == 0.2 and max(result['points']) < counts[0] / 3
-      # RANSAC's distinct best poses (up to 10) checked against the clouds, the best kept.
-      assert 1 <= len(result['verified_fitness']) <= 10
+      # RANSAC's distinct best poses (up to 10) and the BEV search's 5 checked against the
+      # clouds, the best kept.
+      assert 6 <= len(result['verified_fitness']) <= 15
       assert max(result['verified_fitness']) > 0.5
     else:
       assert result['voxel'] == 0 and result['points'] == counts
@@ -352,7 +370,7 @@ def test_register_puts_dense_clouds_on_the_grid_and_voxel_0_keeps_every_point(ti
 
 
 def test_a_cloud_too_large_for_memory_fails_in_one_line(tiny_set, monkeypatch):
-  pair = benchmarks.read_registration_set(tiny_set / 'test_kitti')[0]
+  pair = registration_sets.read_registration_set(tiny_set / 'test_kitti')[0]
   assert len(io.read_cloud(pair.cloud1)) > 1000
   monkeypatch.setattr(io, 'available_memory', lambda: 100_000)
   with pytest.raises(io.CloudFileError, match=r'000000.bin: ~[\d,]+ points need ~0.\d GiB to read '

@@ -7,7 +7,8 @@ import pytest
 from scipy import spatial
 
 from ssd_jax import geometry
-from ssd_jax.data import benchmarks, clean, groundtruth, io
+from ssd_jax.data import clean, groundtruth, io, registration_sets
+from ssd_jax.evaluation import registration
 from ssd_jax.registration import features, keypoints, metrics, pipeline, ransac, reference
 from ssd_jax.synthetic import trajectory
 from tests.conftest import shared_path
@@ -132,9 +133,9 @@ def test_registration_metrics_hand_computed():
   assert e['rre'] == pytest.approx(5.0) and not e['success']
   assert e['rre_geodesic'] == pytest.approx(np.degrees(np.arccos(
       (np.trace(both[:3, :3]) - 1) / 2)))
-  s = metrics.summarize([{'rte': 1.0, 'rre': 1.0, 'rre_geodesic': 1.0, 'success': True, 'trials': 10},
-                         {'rte': 9.0, 'rre': 90.0, 'rre_geodesic': 90.0, 'success': False,
-                          'trials': 30}])
+  s = registration.summarize([
+      {'rte': 1.0, 'rre': 1.0, 'rre_geodesic': 1.0, 'success': True, 'trials': 10},
+      {'rte': 9.0, 'rre': 90.0, 'rre_geodesic': 90.0, 'success': False, 'trials': 30}])
   assert s == {'pairs': 2, 'rte': 1.0, 'rre': 1.0, 'rre_geodesic': 1.0, 'success_rate': 0.5,
                'trials': 20.0}
 
@@ -163,7 +164,7 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
   """UTM-scale float64 clouds are centred in float64 before any float32 step: the pair
   centred on cloud 1 lands the same way at x = 4.5e5, y = 5.4e6 as near the origin, and
   T comes back in the caller's coordinates. Clouds near the origin are not shifted."""
-  pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
+  pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
   c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
   # As scanned (sensor at the origin): exactly the stage-by-stage result, no shift.
   reg, _, _ = pipeline.register(c1, c2, fpfh_max_nn=200)
@@ -206,7 +207,7 @@ def test_pipeline_refuses_bad_clouds_with_one_line():
 
 
 def test_open3d_reference_pipeline_registers_a_pair_and_refuses_a_flat_one(synthetic_root):
-  pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
+  pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
   c1, c2 = (io.read_cloud(p) for p in (pair.cloud1, pair.cloud2))
   for settings in ('paper', 'tutorial'):
     t, seconds, stats = reference.open3d_register(c1, c2, settings=settings)
@@ -242,6 +243,7 @@ def _sparse_rings(seed=0, rings=6):
   return np.concatenate(pts + [wall])
 
 
+@pytest.mark.real_data
 def test_iss_falls_back_on_a_sparse_cloud_and_says_so():
   dense = io.read_cloud(shared_path('example', 'kitti_00_001554.bin'))
   idx, note = keypoints.iss_with_fallbacks(dense)
@@ -290,6 +292,7 @@ def test_upright_fit_is_exact_and_upright_ransac_finds_a_pose_at_few_inliers():
                       pipeline.CloudFeatures(src, np.eye(400), {}), estimator='affine')
 
 
+@pytest.mark.real_data
 @pytest.mark.slow
 def test_fpfh_keeps_its_4m_ball_on_a_dense_cloud_and_is_unchanged_on_a_voxelised_one():
   voxelised = io.read_cloud(shared_path('example', 'kitti_00_001554.bin'))
@@ -312,7 +315,7 @@ def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root
   """A pair densified 12x (3 cm jitter, ~250 k points per cloud) is put on the 0.2 m grid
   and registers to the transform of the pair as given (5 cm, 0.2 degrees); voxel=0
   keeps every point; a cloud already on the grid is used as given."""
-  pair = benchmarks.read_registration_set(synthetic_root / 'test_kitti')[0]
+  pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
   c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
   rng = np.random.default_rng(0)
   dense = [np.repeat(c, 12, axis=0) + rng.normal(0, 0.03, (12 * len(c), 3)) for c in (c1, c2)]
@@ -334,6 +337,7 @@ def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root
   assert grid is dense[0] and note == ''
 
 
+@pytest.mark.real_data
 def test_verification_picks_the_pose_the_clouds_agree_with_among_ransacs_runners_up():
   """Correspondences of a street that repeats every 12 m: RANSAC's best pose is one period
   off (the decoy matches outnumber the true ones), the true pose is a runner-up; the

@@ -5,14 +5,16 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from scipy import spatial
 
 from ssd_jax import geometry
-from ssd_jax.data import benchmarks, datasets, io, rescan
+from ssd_jax.data import datasets, io, registration_sets, rescan
 from ssd_jax.evaluation import learning_curve
 from tests.conftest import shared_path
 
 
+@pytest.mark.real_data
 def test_rescan_pair_is_a_different_sampling_that_the_transform_aligns():
   points = io.read_cloud(shared_path('example', 'oxford_270.bin'))
   cloud1, cloud2, t12 = rescan.rescan_pair(np.random.default_rng(0), points, 130.0)
@@ -27,6 +29,7 @@ def test_rescan_pair_is_a_different_sampling_that_the_transform_aligns():
   assert np.median(spatial.cKDTree(cloud1).query(cloud2)[0]) > 0.3
 
 
+@pytest.mark.real_data
 def test_second_submap_keeps_what_a_sensor_would_not_see():
   """Submap pairs (occlusion off): the second view is the whole place within max_range
   of a displaced centre, not what a sensor there would see."""
@@ -44,6 +47,7 @@ def test_second_submap_keeps_what_a_sensor_would_not_see():
   assert np.linalg.norm(moved[:, :2] - t12[:2, 3], axis=1).max() <= 30.0 + 0.2
 
 
+@pytest.mark.real_data
 def test_rescan_set_is_deterministic_and_covers_every_yaw_bin(tmp_path):
   sources = [shared_path('kitti_object_velodyne', '000000.bin')]
   rows = rescan.make_rescan_set(sources, tmp_path / 'a', seed=3, pairs_per_cloud=8)
@@ -53,12 +57,14 @@ def test_rescan_set_is_deterministic_and_covers_every_yaw_bin(tmp_path):
   assert (tmp_path / 'a' / '000003.bin').read_bytes() == (tmp_path / 'b' / '000003.bin').read_bytes()
   yaws = np.array([r['yaw_deg'] for r in rows])
   np.testing.assert_array_equal(np.sort(np.floor((yaws + 180) / 45)), np.arange(8))
-  pairs = benchmarks.read_registration_set(tmp_path / 'a')
+  pairs = registration_sets.read_registration_set(tmp_path / 'a')
   assert len(pairs) == 8
   bins = [learning_curve.yaw_bin(learning_curve.relative_yaw_deg(p.transform)) for p in pairs]
   assert sorted(bins) == [0, 0, 1, 1, 2, 2, 3, 3]
 
 
+@pytest.mark.real_data
+@pytest.mark.multiprocess
 def test_make_real_pairs_command_submaps_and_bad_flags(tmp_path):
   real = shared_path()
   run = lambda *args: subprocess.run(
@@ -76,6 +82,7 @@ def test_make_real_pairs_command_submaps_and_bad_flags(tmp_path):
   assert 'Traceback' not in out.stderr
 
 
+@pytest.mark.real_data
 def test_rescan_view_is_another_unit_in_the_scans_own_frame():
   points = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin'))
   cfg = rescan.RescanConfig(min_shift=5.0, max_shift=10.0, sensor='vlp16', min_points=500,
@@ -93,6 +100,7 @@ def test_rescan_view_is_another_unit_in_the_scans_own_frame():
   assert np.median(spatial.cKDTree(view).query(view, k=2)[0][:, 1]) > own
 
 
+@pytest.mark.real_data
 def test_rescan_pair_dataset_pairs_a_cloud_with_its_rescan_or_itself(tmp_path):
   source = shared_path('kitti_object_velodyne', '000000.bin')
   kwargs = dict(sensors=('vlp16', 'hdl32'), min_shift=5.0, max_shift=10.0, views_per_cloud=2,

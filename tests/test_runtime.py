@@ -19,6 +19,7 @@ def test_hugepage_env_adds_the_tunable_once_and_keeps_others():
   assert runtime.hugepage_env({})['GLIBC_TUNABLES'] == 'glibc.malloc.hugetlb=1'
 
 
+@pytest.mark.multiprocess
 @pytest.mark.skipif(platform.libc_ver()[0] != 'glibc', reason='glibc only')
 def test_entry_points_reexecute_once_unless_opted_out():
   script = ('from ssd_jax import runtime\n'

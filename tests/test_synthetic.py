@@ -260,6 +260,7 @@ def test_reuse_and_config_errors(tiny_set, tmp_path):
     dataset.check_config(bad)
 
 
+@pytest.mark.multiprocess
 def test_cli_reports_bad_config_without_traceback(tmp_path):
   proc = subprocess.run(
       [sys.executable, '-m', 'experiments.make_synthetic', f'--out={tmp_path / "x"}',
@@ -319,6 +320,7 @@ def test_model_statistics_of_a_known_plane():
   assert stats['planarity median'] > 0.9 and stats['height p5-p95 (m)'] == 0.0
 
 
+@pytest.mark.real_data
 def test_oxford_realism_table_beside_the_real_models(synthetic_root):
   real = shared_path()
   md, stats = realism.compare_oxford_with_real(str(synthetic_root), str(real))
@@ -336,6 +338,7 @@ def test_oxford_realism_table_beside_the_real_models(synthetic_root):
   assert len(md.splitlines()) == 2 + len(synthetic)
 
 
+@pytest.mark.real_data
 def test_realism_table_puts_synthetic_and_real_scans_side_by_side(synthetic_root):
   real = shared_path()
   md, stats = realism.compare_with_real(str(synthetic_root), str(real), stride=2)
@@ -400,6 +403,8 @@ def test_pushbroom_lines_on_a_known_street():
       sensor(range_noise=-0.1)
 
 
+@pytest.mark.real_data
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_synthetic_report_covers_both_test_splits(synthetic_root, tmp_path):
   real = shared_path()

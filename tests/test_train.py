@@ -140,6 +140,7 @@ def _read_metrics(workdir):
     return [{k: v for k, v in json.loads(line).items() if k != 'steps_per_sec'} for line in f]
 
 
+@pytest.mark.real_data
 @pytest.mark.slow
 def test_resume_after_a_crash_is_bitwise_identical(tiny_config, tmp_path, monkeypatch):
   data = str(shared_path('kitti_object_velodyne'))
@@ -172,6 +173,7 @@ def test_resume_after_a_crash_is_bitwise_identical(tiny_config, tmp_path, monkey
   assert [m['step'] for m in _read_metrics(tmp_path / 'resumed')] == list(range(1, 9))
 
 
+@pytest.mark.real_data
 @pytest.mark.slow
 def test_divergence_stops_with_a_clear_message(tiny_config, tmp_path, monkeypatch):
   config = tiny_config
@@ -191,6 +193,7 @@ def test_divergence_stops_with_a_clear_message(tiny_config, tmp_path, monkeypatc
   assert sorted(os.listdir(tmp_path / 'run' / 'checkpoints')) == ['2']
 
 
+@pytest.mark.real_data
 @pytest.mark.slow
 @pytest.mark.parametrize('source', [('kitti_object_velodyne',), ('example',), 'synthetic'])
 def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
@@ -224,6 +227,7 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
   assert median(late, 'rotation_error_deg') < 0.8 * median(first, 'rotation_error_deg')
 
 
+@pytest.mark.multiprocess
 @pytest.mark.slow
 def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
   script = textwrap.dedent('''
@@ -267,6 +271,7 @@ def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
   assert 'rel diffs: gradient' in out.stdout
 
 
+@pytest.mark.real_data
 @pytest.mark.slow
 def test_resuming_with_a_different_model_is_refused(tiny_config, tmp_path):
   tiny_config.data.path = str(shared_path('kitti_object_velodyne'))

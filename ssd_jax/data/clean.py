@@ -8,8 +8,10 @@ from __future__ import annotations
 from absl import logging
 import numpy as np
 
+from ssd_jax import errors
 
-class CloudDataError(ValueError):
+
+class CloudDataError(errors.UserError):
   """A cloud cannot be used for training (no points left, degenerate, ...)."""
 
 

@@ -19,6 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ssd_jax import errors
+
+
 # .bin row layouts: name -> (little-endian dtype, columns). The first three columns are
 # x y z in metres; `i` is an intensity / reflectance, `n` a unit normal.
 BIN_FORMATS = {
@@ -34,7 +37,7 @@ MAX_COORDINATE = 1e8
 _DETECT_ROWS = 8192
 
 
-class CloudFileError(ValueError):
+class CloudFileError(errors.UserError):
   """A point-cloud file is missing, empty, truncated or not in the expected format."""
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ssd_jax import geometry, sensors
-from ssd_jax.data import benchmarks, clean, groundtruth, io, preprocess
+from ssd_jax.data import clean, groundtruth, io, preprocess, registration_sets
 
 
 @dataclasses.dataclass(frozen=True)
@@ -135,7 +135,7 @@ def make_rescan_set(sources: list, out: str | os.PathLike, seed: int = 0,
                     pairs_per_cloud: int = 8, cfg: RescanConfig = RescanConfig(),
                     progress=None) -> list[dict]:
   """Write a registration set of re-scan pairs (the sequence-folder layout that
-  `benchmarks.read_registration_set` reads: OUT/groundtruths.txt, OUT/%06d.bin (xyz +
+  `registration_sets.read_registration_set` reads: OUT/groundtruths.txt, OUT/%06d.bin (xyz +
   normals), and
   OUT/sources.tsv naming each pair's source scan and yaw).
 
@@ -180,7 +180,7 @@ def make_cross_sensor_set(sources: list, out: str | os.PathLike, sensor_names, d
   scan (cloud 1) and its re-scan by that unit from a standpoint low-high metres away at a
   uniform yaw (cloud 2). Writes OUT/groundtruths.txt, OUT/%06d.bin (xyz + normals) and
   OUT/pairs.tsv
-  (`benchmarks.write_pair_info`); pair n draws from `default_rng((seed, n))`.
+  (`registration_sets.write_pair_info`); pair n draws from `default_rng((seed, n))`.
   -> the pairs.tsv rows."""
   out = Path(out)
   out.mkdir(parents=True, exist_ok=True)
@@ -214,5 +214,5 @@ def make_cross_sensor_set(sources: list, out: str | os.PathLike, sensor_names, d
           if progress is not None:
             progress(1)
   groundtruth.write_groundtruths(out / 'groundtruths.txt', gts)
-  benchmarks.write_pair_info(out, rows)
+  registration_sets.write_pair_info(out, rows)
   return rows

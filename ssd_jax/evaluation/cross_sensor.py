@@ -5,7 +5,8 @@ Each cell holds success (RTE < 2 m and Euler-sum RRE < 5 degrees), RTE / RRE ove
 successful pairs and the inlier ratio (RANSAC inliers / nearest-neighbour matches, mean
 over its pairs). Besides the keypoint x descriptor rows of the project's pipeline, the
 row `open3d` is Open3D's own pipeline with the paper's searches
-(`registration.reference`): the outside reference the matrix is read against.
+(`registration.reference`): the outside reference the matrix is read against; the row
+`bev` is the bird's-eye-view search alone (`registration.bev`), its best poses verified.
 """
 
 from __future__ import annotations
@@ -18,33 +19,51 @@ import jax
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import distributed
-from ssd_jax.evaluation import feature_store, tables
-from ssd_jax.registration import metrics, reference
+from ssd_jax import distributed, errors
+from ssd_jax.evaluation import feature_store, registration, tables
+from ssd_jax.registration import bev, metrics, reference, verification
 
+# Rows that register whole clouds, without the project's keypoints and descriptors:
+# Open3D's own pipeline (the outside reference), and the bird's-eye-view search alone,
+# its best poses verified (what the descriptor adds to the register command's defaults
+# is read against it).
 REFERENCE_ROW = 'open3d'
-REFERENCE_LABEL = 'Open3D ISS + FPFH (paper searches)'
+BEV_ROW = 'bev'
+CLOUD_ROWS = {REFERENCE_ROW: 'Open3D ISS + FPFH (paper searches)',
+              BEV_ROW: 'BEV search alone, verified'}
 
 
 def label(row: str) -> str:
-  return REFERENCE_LABEL if row == REFERENCE_ROW else feature_store.row_label(row)
+  return CLOUD_ROWS.get(row) or feature_store.row_label(row)
 
 
-def register_reference(pairs: Sequence, store: feature_store.FeatureStore, *, seed: int = 0,
-                       log: TextIO | None = None, progress: bool = True,
-                       desc: str = 'open3d') -> list[dict]:
-  """Open3D's pipeline (paper searches) on every pair -> per-pair results in
-  `registration.register_pairs`' layout (row 'open3d'); RANSAC of pair n is seeded with
-  seed * 1,000,003 + n. A pair where ISS finds fewer than 3 keypoints fails with its
-  `error`, as the plain pipeline would stop there."""
+def _register_clouds(row: str, points1: np.ndarray, points2: np.ndarray, seed: int
+                     ) -> tuple[np.ndarray, dict]:
+  """One of `CLOUD_ROWS` on one pair -> (T_12 [4, 4], {'inliers', 'matches'})."""
+  if row == REFERENCE_ROW:
+    t, _, stats = reference.open3d_register(points1, points2, seed, 'paper')
+    return t, stats
+  candidates = bev.search(points1, points2, feature_store.BEV_CANDIDATES).transforms
+  best, refined, _ = verification.verify(points1, points2, candidates)
+  return refined[best], {'inliers': 0, 'matches': 0}
+
+
+def register_clouds(pairs: Sequence, store: feature_store.FeatureStore,
+                    row: str = REFERENCE_ROW, *, seed: int = 0, log: TextIO | None = None,
+                    progress: bool = True, desc: str = 'open3d') -> list[dict]:
+  """One of `CLOUD_ROWS` on every pair -> per-pair results in
+  `registration.register_pairs`' layout; RANSAC of pair n is seeded with
+  seed * 1,000,003 + n. A pair the method cannot register (e.g. ISS finds fewer than 3
+  keypoints) fails with its `error`, as the plain pipeline would stop there."""
+  if row not in CLOUD_ROWS:
+    raise errors.UserError(f'row {row!r} is not one of {sorted(CLOUD_ROWS)}')
   one_process = jax.process_count() == 1
 
   def register(n: int, pair) -> dict:
-    res = {'row': REFERENCE_ROW, 'sequence': pair.sequence, 'idx1': pair.idx1,
-           'idx2': pair.idx2}
+    res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
     try:
-      t, _, stats = reference.open3d_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2),
-                                              seed * 1_000_003 + n, 'paper')
+      t, stats = _register_clouds(row, store.cloud(pair.cloud1), store.cloud(pair.cloud2),
+                                  seed * 1_000_003 + n)
     except ValueError as e:
       res.update(trials=0, inliers=0, matches=0, rte=float('inf'), rre=float('inf'),
                  rre_geodesic=float('inf'), success=False, error=str(e))
@@ -72,7 +91,7 @@ def distance_bin(distance: float, bins: Sequence[Sequence[float]]) -> str | None
 
 
 def _cell(results: list[dict]) -> dict:
-  s = metrics.summarize(results)
+  s = registration.summarize(results)
   ratios = [r['inliers'] / r['matches'] for r in results if r.get('matches')]
   return {**s, 'inlier_ratio': float(np.mean(ratios)) if ratios else float('nan')}
 
@@ -80,7 +99,7 @@ def _cell(results: list[dict]) -> dict:
 def matrix(results: Mapping[str, list[dict]], info: Mapping[tuple[int, int], dict],
            bins: Sequence[Sequence[float]]) -> dict:
   """{row: {(sensor, bin): cell, (sensor, 'all'): ..., ('all', bin): ..., ('all', 'all')}}
-  where a cell is `metrics.summarize` plus the mean inlier ratio. `sensor` is the unit of
+  where a cell is `registration.summarize` plus the mean inlier ratio. `sensor` is the unit of
   cloud 2 (cloud 1 is the set's reference unit)."""
   out = {}
   for row, per_pair in results.items():

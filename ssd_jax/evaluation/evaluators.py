@@ -34,8 +34,8 @@ from typing import Callable, Sequence
 import jax
 import ml_collections
 
-from ssd_jax import distributed, viz
-from ssd_jax.data import benchmarks, clusters, io
+from ssd_jax import distributed, errors, viz
+from ssd_jax.data import clusters, io, registration_sets
 from ssd_jax.evaluation import (cross_sensor, descriptor_matching, feature_store, fingerprint,
                                 precision, registration, repeatability, report)
 from ssd_jax.registration import pipeline
@@ -88,7 +88,7 @@ class Context:
     raise Unavailable(f'no {what} at {", ".join(tried)}')
 
   def pairs(self, candidates):
-    path, pairs = self.find(candidates, benchmarks.read_registration_set, 'registration set')
+    path, pairs = self.find(candidates, registration_sets.read_registration_set, 'registration set')
     max_pairs = self.config.max_pairs
     pairs = pairs[:max_pairs] if max_pairs else pairs
     return pairs, f'{path} ({len(pairs)} pairs)'
@@ -107,19 +107,20 @@ def _registration(name, ev, ctx: Context) -> Section:
 
 
 def _cross_sensor(name, ev, ctx: Context) -> Section:
-  read = lambda path: (benchmarks.read_registration_set(path), benchmarks.read_pair_info(path))
+  read = lambda path: (registration_sets.read_registration_set(path),
+                       registration_sets.read_pair_info(path))
   path, (pairs, info) = ctx.find(ev.dataset, read, 'cross-sensor set')
   pairs = pairs[:ctx.config.max_pairs] if ctx.config.max_pairs else pairs
   cfg, rows = ctx.config, list(ev.rows)
-  store_rows = [r for r in rows if r != cross_sensor.REFERENCE_ROW]
+  store_rows = [r for r in rows if r not in cross_sensor.CLOUD_ROWS]
   with open(ctx.workdir / f'{name}_pairs.jsonl', 'w') as log:
     results = registration.register_pairs(
         pairs, feature_store.runnable_rows(store_rows, ctx.missing), ctx.store, seed=cfg.seed,
         inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
         max_trials=cfg.max_trials, log=log, desc=name)
-    if cross_sensor.REFERENCE_ROW in rows:
-      results[cross_sensor.REFERENCE_ROW] = cross_sensor.register_reference(
-          pairs, ctx.store, seed=cfg.seed, log=log, desc=f'{name} open3d')
+    for row in (r for r in rows if r in cross_sensor.CLOUD_ROWS):
+      results[row] = cross_sensor.register_clouds(pairs, ctx.store, row, seed=cfg.seed, log=log,
+                                                  desc=f'{name} {row}')
   units = list(dict.fromkeys(info[p.idx1, p.idx2]['sensor2'] for p in pairs))
   cells = cross_sensor.matrix(results, info, ev.distance_bins)
   return Section(ev.title, cross_sensor.outputs(
@@ -235,7 +236,7 @@ EVALUATORS = {
     'figures': Evaluator(_figures, lambda config, ev: list(ev.registration_rows) + [
         f'{s}+fpfh' for s in ev.keypoint_sources]),
     'cross_sensor': Evaluator(_cross_sensor, lambda config, ev: [
-        r for r in ev.rows if r != cross_sensor.REFERENCE_ROW]),
+        r for r in ev.rows if r not in cross_sensor.CLOUD_ROWS]),
 }
 TYPES = tuple(EVALUATORS)
 
@@ -244,11 +245,11 @@ def ordered_evals(config: ml_collections.ConfigDict) -> list[tuple[str, ml_colle
   """config.evals as [(name, section)] in run order; an unknown type is a clear error."""
   evals = list(config.evals.items())
   if not evals:
-    raise ValueError('config.evals is empty: name at least one evaluation')
+    raise errors.UserError('config.evals is empty: name at least one evaluation')
   for name, ev in evals:
     if ev.get('type') not in EVALUATORS:
-      raise ValueError(f'evals.{name}.type must be one of {", ".join(TYPES)}, '
-                       f'got {ev.get("type")!r}')
+      raise errors.UserError(f'evals.{name}.type must be one of {", ".join(TYPES)}, '
+                             f'got {ev.get("type")!r}')
   return sorted(evals, key=lambda e: (TYPES.index(e[1].type), e[0]))
 
 
@@ -300,7 +301,7 @@ def _evaluate(config: ml_collections.ConfigDict, workdir: Path, command: str,
     ran.append((name, ev.type))
     skipped += section.skipped
   if not sections:
-    raise ValueError(f'nothing to evaluate under {ctx.data_root}: ' + '; '.join(skipped))
+    raise errors.UserError(f'nothing to evaluate under {ctx.data_root}: ' + '; '.join(skipped))
   path = workdir / 'report.md'
   path.write_text(_report(config, ctx, sections, skipped, seconds,
                           [name for name, kind in ran if kind == 'registration'], command))

@@ -17,7 +17,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ssd_jax import pretrained
+from ssd_jax import errors, pretrained
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
 from ssd_jax.registration import features as features_lib, pipeline
@@ -30,30 +30,36 @@ NAMES = {'iss': 'ISS', 'random': 'random', 'auto': 'farthest-point', 'fpfh': 'FP
          'ours_run': 'Ours (this run)'}
 
 
-# A row's last part 'verify': RANSAC's distinct best poses checked against the clouds
-# (`pipeline.verify`), this many.
+# A row's part 'verify': RANSAC's distinct best poses checked against the clouds
+# (`pipeline.verify`), this many; its part 'bev' (after 'verify'): the bird's-eye-view
+# search's best poses checked with them (`bev.search`), this many.
 VERIFY_CANDIDATES = 10
+BEV_CANDIDATES = 5
 
 
-def _parts(row: str) -> tuple[list[str], str, bool]:
-  """-> ([keypoints, descriptor], estimator, verify), or a clear error."""
+def _parts(row: str) -> tuple[list[str], str, bool, bool]:
+  """-> ([keypoints, descriptor], estimator, verify, bev), or a clear error."""
   parts = row.split('+')
+  bev = len(parts) == 5 and parts[4] == 'bev'
+  if bev:
+    parts = parts[:4]
   verify = len(parts) == 4 and parts[3] == 'verify'
   if verify:
     parts = parts[:3]
   estimator = 'rigid'
   if len(parts) == 3 and parts[2] in pipeline.ESTIMATORS:
     parts, estimator = parts[:2], parts[2]
-  if len(parts) != 2 or not all(parts):
-    raise ValueError(f'row {row!r} must be "keypoints+descriptor[+estimator[+verify]]", e.g. '
-                     f'iss+fpfh or auto+ours+upright+verify (estimators: '
-                     f'{", ".join(pipeline.ESTIMATORS)})')
-  return parts, estimator, verify
+  if len(parts) != 2 or not all(parts) or (bev and estimator != 'upright'):
+    raise errors.UserError(
+        f'row {row!r} must be "keypoints+descriptor[+estimator[+verify[+bev]]]" (bev with '
+        'the upright estimator), e.g. iss+fpfh or auto+ours+upright+verify+bev (estimators: '
+        f'{", ".join(pipeline.ESTIMATORS)})')
+  return parts, estimator, verify, bev
 
 
 def split_row(row: str) -> tuple[str, str]:
   """'iss+fpfh' (or 'iss+fpfh+upright', 'auto+fpfh+upright+verify') -> ('iss', 'fpfh')."""
-  (kp, desc), _, _ = _parts(row)
+  (kp, desc), _, _, _ = _parts(row)
   return kp, desc
 
 
@@ -63,8 +69,14 @@ def row_estimator(row: str) -> str:
 
 
 def row_verifies(row: str) -> bool:
-  """Whether a row checks RANSAC's best poses against the clouds (its last part 'verify')."""
+  """Whether a row checks RANSAC's best poses against the clouds (its part 'verify')."""
   return _parts(row)[2]
+
+
+def row_bev_candidates(row: str) -> int:
+  """How many bird's-eye-view search poses a row verifies with RANSAC's (its last part
+  'bev'), else 0."""
+  return BEV_CANDIDATES if _parts(row)[3] else 0
 
 
 def row_label(row: str) -> str:
@@ -72,6 +84,8 @@ def row_label(row: str) -> str:
   suffix = ', upright RANSAC' if row_estimator(row) == 'upright' else ''
   if row_verifies(row):
     suffix += ', verified'
+  if row_bev_candidates(row):
+    suffix += ' with BEV search'
   return f'{NAMES.get(kp, kp)} kpt + {NAMES.get(desc, desc)} desc{suffix}'
 
 

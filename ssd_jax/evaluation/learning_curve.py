@@ -18,7 +18,7 @@ import numpy as np
 
 from ssd_jax import geometry
 from ssd_jax.evaluation import feature_store, precision, registration
-from ssd_jax.registration import features as features_lib, metrics
+from ssd_jax.registration import features as features_lib
 
 YAW_BINS = ((0, 45), (45, 90), (90, 135), (135, 180))   # |relative yaw|, degrees
 COLUMNS = (('run', 'step', 'set', 'row', 'pairs', 'success', 'rte', 'rre', 'rre_geodesic', 'trials',
@@ -40,7 +40,7 @@ def summarize_row(pairs: Sequence, results: Sequence[dict], precision_curve: np.
                   ) -> dict[str, float]:
   """One CSV row's numbers: success in percent, RTE (m), RRE (deg), mean trials,
   precision at 1 m (percent) and success per yaw bin (percent; NaN for an empty bin)."""
-  s = metrics.summarize(list(results))
+  s = registration.summarize(list(results))
   out = {'pairs': s['pairs'], 'success': 100 * s['success_rate'], 'rte': s['rte'],
          'rre': s['rre'], 'rre_geodesic': s['rre_geodesic'], 'trials': s['trials'],
          'precision_1m': 100 * precision.value_at(precision_curve, 1.0)}

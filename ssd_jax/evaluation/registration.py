@@ -7,6 +7,7 @@ import json
 from typing import Mapping, Sequence, TextIO
 
 import jax
+import numpy as np
 from tqdm import auto as tqdm
 
 from ssd_jax import distributed
@@ -15,13 +16,24 @@ from ssd_jax.evaluation import feature_store, paper, tables
 from ssd_jax.registration import metrics, pipeline
 
 
+def summarize(results: list[dict]) -> dict[str, float]:
+  """Table row: RTE / RRE means over successful pairs, success rate and mean trials over
+  all pairs."""
+  ok = [r for r in results if r['success']]
+  mean = lambda key, rows: float(np.mean([r[key] for r in rows])) if rows else float('nan')
+  return {'pairs': len(results), 'rte': mean('rte', ok), 'rre': mean('rre', ok),
+          'rre_geodesic': mean('rre_geodesic', ok),
+          'success_rate': len(ok) / max(len(results), 1),
+          'trials': mean('trials', results)}
+
+
 def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.FeatureStore, *,
                    seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
                    max_trials: int = 10_000, log: TextIO | None = None,
                    progress: bool = True, desc: str = 'registration') -> dict[str, list[dict]]:
   """Register every pair with every row -> {row: [per-pair result]}.
 
-  pairs: `benchmarks.RegistrationPair`s. Pair n's RANSAC samples are seeded with
+  pairs: `registration_sets.RegistrationPair`s. Pair n's RANSAC samples are seeded with
   seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
   result holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair
   with fewer than 3 keypoints in a cloud fails, with its `error`); with
@@ -45,7 +57,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
                                 candidates=feature_store.VERIFY_CANDIDATES if verify else 1)
         if verify:
           reg = pipeline.verify(reg, f1, f2, store.cloud(pair.cloud1), store.cloud(pair.cloud2),
-                                inlier_threshold)
+                                inlier_threshold, feature_store.row_bev_candidates(row))
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named
       except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,
@@ -86,7 +98,7 @@ def registration_table(results: Mapping[str, list[dict]], rows: Sequence[str],
     ref = ref_rows.get(row)
     ref = ' / '.join(str(v) for v in ref) if ref else '-'
     if row in results:
-      s = metrics.summarize(results[row])
+      s = summarize(results[row])
       table.append([feature_store.row_label(row), s['pairs'], tables.fmt(s['rte'], 3),
                     tables.fmt(s['rre'], 3), tables.fmt(s['rre_geodesic'], 3),
                     tables.fmt(100 * s['success_rate']), f'{s["trials"]:.0f}', ref])

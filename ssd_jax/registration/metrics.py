@@ -1,4 +1,4 @@
-"""Registration errors and table summaries (docs/method.md §4)."""
+"""Registration errors of one pair: RTE, RRE and success (docs/method.md §4)."""
 
 from __future__ import annotations
 
@@ -19,14 +19,3 @@ def registration_errors(t_gt: np.ndarray, t_est: np.ndarray) -> dict[str, float]
   geo = float(geometry.geodesic_angle_deg(t_gt[:3, :3], t_est[:3, :3]))
   return {'rte': rte, 'rre': rre, 'rre_geodesic': geo,
           'success': bool(rte < MAX_RTE and rre < MAX_RRE)}
-
-
-def summarize(results: list[dict]) -> dict[str, float]:
-  """Table row: RTE / RRE means over successful pairs, success rate and mean trials over
-  all pairs."""
-  ok = [r for r in results if r['success']]
-  mean = lambda key, rows: float(np.mean([r[key] for r in rows])) if rows else float('nan')
-  return {'pairs': len(results), 'rte': mean('rte', ok), 'rre': mean('rre', ok),
-          'rre_geodesic': mean('rre_geodesic', ok),
-          'success_rate': len(ok) / max(len(results), 1),
-          'trials': mean('trials', results)}

@@ -16,7 +16,7 @@ from scipy import spatial
 from ssd_jax import inference
 from ssd_jax.data import clean, preprocess
 from ssd_jax.data.clean import check_cloud
-from ssd_jax.registration import features, keypoints as keypoints_lib, matching, ransac
+from ssd_jax.registration import bev, features, keypoints as keypoints_lib, matching, ransac
 from ssd_jax.registration import verification
 
 KEYPOINTS = ('auto', 'iss', 'learned', 'random')
@@ -206,13 +206,19 @@ def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_thresho
 
 
 def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1: np.ndarray,
-           points2: np.ndarray, inlier_threshold: float = 1.0) -> Registration:
+           points2: np.ndarray, inlier_threshold: float = 1.0,
+           bev_candidates: int = 0) -> Registration:
   """`reg` with the candidate pose (`estimate(candidates=k)`) that, refined by ICP, lays the
   most of cloud 2 [N2, 3] on cloud 1 [N1, 3] (`verification.verify`; the clouds and the
-  features in the same coordinates, metres near the origin). Inliers and the
-  RegistrationResult numbers are recounted over the matches under it."""
+  features in the same coordinates, metres near the origin). With `bev_candidates` b > 0
+  (upright scans), the b best poses of the bird's-eye-view search (`bev.search`) are
+  checked after RANSAC's. Inliers and the RegistrationResult numbers are recounted over
+  the matches under the chosen pose."""
   t0 = time.perf_counter()
   candidates = reg.candidates if reg.candidates is not None else reg.transform[None]
+  if bev_candidates > 0:
+    candidates = np.concatenate([candidates,
+                                 bev.search(points1, points2, bev_candidates).transforms])
   best, refined, fitness = verification.verify(points1, points2, candidates)
   xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[reg.matches[:, 1]].astype(np.float64)
   inliers, stats = _match_stats(xyz1, xyz2, refined[best], inlier_threshold)
@@ -250,7 +256,8 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
              descriptor: str = 'fpfh', model=None, seed: int = 0,
              fpfh_max_nn: int = features.FPFH_MAX_NN, icp: bool = False,
              estimator: str = 'rigid', voxel: float | None = None, verify_candidates: int = 0,
-             progress=None) -> tuple[Registration, CloudFeatures, CloudFeatures]:
+             bev_candidates: int = 0, progress=None
+             ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
   """The whole pipeline on two clouds, in the caller's coordinates.
 
   points1 (target) [N1, 3] and points2 (source) [N2, 3] metres, any float type. Clouds
@@ -261,11 +268,15 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
   normals keep facing the sensor there, exactly as `cloud_features` computes them.
   Each cloud is put on the `voxel` m grid first (`to_grid`; None: the model's, 0: every
   point as given), ICP included; each feature's `grid` says what was done. With
-  `verify_candidates` k > 0, RANSAC's k distinct best poses are checked against the
-  clouds (`verify`) and the best of them, ICP-refined, is the transform.
+  `verify_candidates` k > 0, RANSAC's k distinct best poses, and with the upright
+  estimator the `bev_candidates` best of the bird's-eye-view search, are checked against
+  the clouds (`verify`) and the best of them, ICP-refined, is the transform.
   `progress(stage)`, if given, is called as each stage starts.
   -> (registration, features of cloud 1, features of cloud 2).
   """
+  if bev_candidates > 0 and estimator != 'upright':
+    raise ValueError(f"the BEV search's poses turn about z only: bev_candidates needs the "
+                     f"upright estimator, got {estimator!r}")
   clouds = [check_cloud(p, name, np.float64) for p, name in ((points1, 'cloud 1'),
                                                              (points2, 'cloud 2'))]
   offset = local_origin(clouds[0], clouds[1])
@@ -302,7 +313,7 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
     reg = estimate(f1, f2, seed, estimator=estimator, candidates=k)
   if verify_candidates > 0:
     stage('verification')
-    reg = verify(reg, f1, f2, local[0], local[1])
+    reg = verify(reg, f1, f2, local[0], local[1], bev_candidates=bev_candidates)
   reg.notes = notes
   transform = reg.transform
   if icp:

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ssd_jax import cf
+from ssd_jax import cf, padding
 
 
 @dataclasses.dataclass(frozen=True)
@@ -159,9 +159,6 @@ def _refit(xyz1, xyz2, valid, sample, *, threshold):
   return r, t, inliers
 
 
-def _bucket(n: int, smallest: int = 256) -> int:
-  return max(smallest, 1 << (n - 1).bit_length())
-
 
 # Batched numpy scoring holds [batch, C, 3] float64 residuals: 12 MB at 512 x 1,024.
 NUMPY_MAX_CORRESPONDENCES = 1024
@@ -206,7 +203,7 @@ def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
     return RansacResult(transform, inliers, trials)
   with jax.enable_x64(x64):
     dtype = np.float64 if x64 else np.float32
-    n, size = len(xyz1), _bucket(len(xyz1))
+    n, size = len(xyz1), padding.bucket(len(xyz1), 256)
     pad = lambda a: jnp.asarray(np.concatenate([a, np.zeros((size - n, 3))]).astype(dtype))
     x1, x2, valid = pad(xyz1), pad(xyz2), jnp.asarray(np.arange(size) < n)
     score = lambda batch: np.asarray(_inlier_counts(   # the host reads each batch's counts:

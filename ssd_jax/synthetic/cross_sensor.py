@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from ssd_jax import geometry, sensors
-from ssd_jax.data import benchmarks, groundtruth, io
+from ssd_jax.data import groundtruth, io, registration_sets
 from ssd_jax.synthetic import dataset, lidar, scene as scene_lib, trajectory
 
 SPLIT = 5
@@ -146,7 +146,7 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
           if progress is not None:
             progress(1)
   groundtruth.write_groundtruths(partial / 'groundtruths.txt', gts)
-  benchmarks.write_pair_info(partial, rows)
+  registration_sets.write_pair_info(partial, rows)
   manifest = {'config': settings, 'pairs': n}
   (partial / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + '\n')
   if out.exists():

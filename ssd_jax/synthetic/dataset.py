@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 from scipy import spatial
 
-from ssd_jax import geometry
+from ssd_jax import config_upgrade, errors, geometry
 from ssd_jax.data import datasets, groundtruth, io, kitti, preprocess
 from ssd_jax.registration import keypoints
 from ssd_jax.synthetic import lidar, pushbroom, scene as scene_lib, trajectory
@@ -46,14 +46,8 @@ OXFORD_SENSORS = ('spinning', 'pushbroom')
 FORMAT_VERSION = 1
 
 
-class SyntheticConfigError(ValueError):
+class SyntheticConfigError(errors.UserError):
   """A synthetic-data config value is out of range."""
-
-
-def _oxford_sensor(config) -> str:
-  """The Oxford-style split's sensor; a config from before the key was added (an older
-  set's manifest) made spinning-scan models."""
-  return config.test_oxford.get('sensor', ADDED_KEYS[('test_oxford', 'sensor')])
 
 
 def check_config(config) -> None:
@@ -72,11 +66,11 @@ def check_config(config) -> None:
   positive('normal_radius', config.normal_radius)
   positive('test_oxford.num_points', config.test_oxford.num_points)
   positive('test_oxford.voxel_size', config.test_oxford.voxel_size, allow_zero=True)
-  if _oxford_sensor(config) not in OXFORD_SENSORS:
+  if config.test_oxford.sensor not in OXFORD_SENSORS:
     raise SyntheticConfigError(f'test_oxford.sensor must be one of {OXFORD_SENSORS}, got '
                                f'{config.test_oxford.sensor!r}')
-  positive('test_oxford.line_spacing', config.test_oxford.get('line_spacing', 0.2))
-  if (_oxford_sensor(config) == 'pushbroom' and config.test_oxford.num_scenes
+  positive('test_oxford.line_spacing', config.test_oxford.line_spacing)
+  if (config.test_oxford.sensor == 'pushbroom' and config.test_oxford.num_scenes
       and config.scene_length - 2 * trajectory.MARGIN < 2 * config.test_oxford.crop_radius):
     raise SyntheticConfigError(
         f'test_oxford: a pass of scene_length {config.scene_length} m (less '
@@ -292,7 +286,7 @@ def _write_test_oxford_pushbroom(config, out: Path, tick) -> int:
 
 def _write_test_oxford(config, out: Path, tick) -> int:
   """Oxford test models: cropped, a fixed point count, each in a random z-rotated frame."""
-  if _oxford_sensor(config) == 'pushbroom':
+  if config.test_oxford.sensor == 'pushbroom':
     return _write_test_oxford_pushbroom(config, out, tick)
   cfg, idx0, all_pairs = config.test_oxford, 0, []
   folder = out / 'test_oxford' / 'test_models'
@@ -393,7 +387,7 @@ def _write_clusters(config, out: Path, tick) -> tuple[int, int]:
 def count_scans(config) -> int:
   """Scans (push-broom Oxford-style models) the config will simulate, for the progress
   display."""
-  pushbroom_oxford = _oxford_sensor(config) == 'pushbroom'
+  pushbroom_oxford = config.test_oxford.sensor == 'pushbroom'
   return sum(len(_pushbroom_drive(config, seq)[4]) if split == 'test_oxford' and pushbroom_oxford
              else len(_scene_and_poses(config, split, seq)[2])
              for split in SPLITS for seq in range(config[split].num_scenes))
@@ -411,7 +405,7 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
   settings = json.loads(config.to_json())
   existing = read_manifest(out)
   if existing is not None:
-    if (_with_added_keys(existing['config']) == settings
+    if (config_upgrade.upgrade_synthetic(existing['config']) == settings
         and existing['format_version'] == FORMAT_VERSION):
       return {**existing, 'reused': True}
     if not overwrite:
@@ -438,19 +432,6 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
     shutil.rmtree(out)
   os.replace(partial, out)
   return {**manifest, 'reused': False}
-
-
-# Config keys added after datasets were written, with the value those datasets used:
-# a dataset written before a key existed is reused when the config keeps that value.
-ADDED_KEYS = {('test_kitti', 'random_yaw'): False, ('test_oxford', 'sensor'): 'spinning',
-              ('test_oxford', 'line_spacing'): 0.2}
-
-
-def _with_added_keys(settings: dict) -> dict:
-  settings = json.loads(json.dumps(settings))
-  for (section, key), value in ADDED_KEYS.items():
-    settings.get(section, {}).setdefault(key, value)
-  return settings
 
 
 def read_manifest(out: str | os.PathLike) -> dict | None:

@@ -1,0 +1,10 @@
+"""The project's own errors: what a user can fix (a bad file, cloud, config or checkpoint).
+
+Every command reports these in one line naming the problem and exits non-zero; any other
+exception is a bug and keeps its traceback. Each subclasses ValueError as well, so code
+that catches a ValueError from a library call keeps catching them.
+"""
+
+
+class UserError(ValueError):
+  """Bad input a user can fix; the message names what and where, in one line."""

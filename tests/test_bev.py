@@ -1,0 +1,115 @@
+"""The bird's-eye-view search: what its images hold, and the poses it finds."""
+
+import numpy as np
+import pytest
+
+from ssd_jax import geometry
+from ssd_jax.data import io
+from ssd_jax.registration import bev, metrics, pipeline, verification
+from tests.conftest import shared_path
+
+
+def test_structure_image_keeps_what_rises_from_sloped_ground_and_drops_the_ground():
+  """Ground rising 5 % along x (a hill: 2 m over 40 m) leaves no cell; a 3 m pole at
+  (10, -5) leaves its cell, the image's peak."""
+  x, y = np.meshgrid(np.arange(-20, 20, 0.2), np.arange(-20, 20, 0.2))
+  ground = np.stack([x.ravel(), y.ravel(), 0.05 * x.ravel()], 1)
+  pole = np.stack([np.full(30, 10.0), np.full(30, -5.0), 0.5 + np.arange(30) * 0.1], 1)
+  image = bev.structure_image(np.concatenate([ground, pole]))
+  size = bev._size(bev.EXTENT, bev.RESOLUTION)
+  assert image.shape == (size, size)
+  peak = np.unravel_index(np.argmax(image), image.shape)
+  assert peak == (size // 2 + 20, size // 2 - 10)     # 10 m, -5 m at 0.5 m per cell
+  far = np.ones_like(image, bool)
+  far[peak[0] - 5:peak[0] + 6, peak[1] - 5:peak[1] + 6] = False
+  assert image[far].max() == 0.0
+  assert not bev.structure_image(ground).any()
+
+
+def _pair(yaw_deg: float, shift) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+  """A real KITTI scan within 50 m (cloud 1) and the scan seen from `shift` metres away at
+  `yaw_deg`: half of its points, 3 cm noise, what lies within 50 m of the new standpoint
+  (cloud 2) -> (cloud 1, cloud 2, T_12)."""
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
+  cloud1 = scan[np.linalg.norm(scan[:, :2], axis=1) < 50]
+  t_true = geometry.make_transform(geometry.rotation_z(np.radians(yaw_deg)), np.asarray(shift))
+  rng = np.random.default_rng(0)
+  half = cloud1[::2]
+  cloud2 = (half - t_true[:3, 3]) @ t_true[:3, :3] + rng.normal(0, 0.03, half.shape)
+  return cloud1, cloud2[np.linalg.norm(cloud2[:, :2], axis=1) < 50], t_true
+
+
+@pytest.mark.real_data
+def test_search_finds_a_pose_turned_and_shifted_anywhere_on_a_real_scan():
+  cloud1, cloud2, t_true = _pair(137.0, [14.0, -9.0, 0.3])
+  found = bev.search(cloud1, cloud2, k=3)
+  assert found.transforms.shape == (3, 4, 4) and np.all(np.diff(found.scores) <= 0)
+  err = metrics.registration_errors(t_true, found.transforms[0])
+  # Half a yaw step and half a cell (the z shift is ICP's to find).
+  assert err['rre_geodesic'] < bev.YAW_STEP / 2 + 0.1
+  assert np.linalg.norm(found.transforms[0][:2, 3] - t_true[:2, 3]) < bev.RESOLUTION
+  np.testing.assert_array_equal(found.transforms, bev.search(cloud1, cloud2, k=3).transforms)
+  with pytest.raises(ValueError, match='yaw_step > 0'):
+    bev.search(cloud1, cloud2, yaw_step=0)
+
+
+@pytest.mark.real_data
+def test_verification_with_bev_candidates_registers_where_every_ransac_pose_is_wrong():
+  """RANSAC's candidates all 8 m off; the BEV search's poses join the check, and the
+  verified pose is exact."""
+  cloud1, cloud2, t_true = _pair(-65.0, [-20.0, 6.0, 0.0])
+  wrong = np.stack([t_true @ geometry.make_transform(geometry.rotation_z(a), np.array([8.0, 0, 0]))
+                    for a in (0.0, 0.5, 1.0)])
+  f = pipeline.CloudFeatures(cloud2[:10], np.eye(10), {})
+  reg = pipeline.Registration(wrong[0], np.stack([np.arange(10)] * 2, 1), np.zeros(10, bool),
+                              0, {}, candidates=wrong)
+  assert not metrics.registration_errors(t_true, pipeline.verify(reg, f, f, cloud1,
+                                                                 cloud2).transform)['success']
+  verified = pipeline.verify(reg, f, f, cloud1, cloud2, bev_candidates=3)
+  assert len(verified.verified_fitness) == 6
+  err = metrics.registration_errors(t_true, verified.transform)
+  assert err['rte'] < 0.1 and err['rre_geodesic'] < 0.3, err
+  with pytest.raises(ValueError, match='needs the upright estimator'):
+    pipeline.register(cloud1, cloud2, 'auto', 'fpfh', estimator='rigid', verify_candidates=1,
+                      bev_candidates=3)
+
+
+def _box(cx: float, cy: float, size=(2.0, 1.0, 1.6), step: float = 0.2) -> np.ndarray:
+  """The sides and top of a car-sized box standing on the ground at (cx, cy), sampled on
+  a `step` grid."""
+  sx, sy, sz = size
+  xs, ys, zs = (np.arange(-s / 2, s / 2 + 1e-6, step) for s in size)
+  gx, gz = np.meshgrid(xs, zs)
+  gy, hz = np.meshgrid(ys, zs)
+  tx, ty = np.meshgrid(xs, ys)
+  faces = [np.column_stack([gx.ravel(), np.full(gx.size, side), gz.ravel() + sz / 2])
+           for side in (-sy / 2, sy / 2)]
+  faces += [np.column_stack([np.full(gy.size, side), gy.ravel(), hz.ravel() + sz / 2])
+            for side in (-sx / 2, sx / 2)]
+  faces.append(np.column_stack([tx.ravel(), ty.ravel(), np.full(tx.size, sz)]))
+  return np.concatenate(faces) + np.array([cx, cy, 0.05 + sz / 2])
+
+
+def test_verification_scores_what_rises_from_the_ground():
+  """A street on a 0.2 m grid: ground, a facade, five parked cars; cloud 2 is its middle
+  24 m. A pose 8 m along the street lays cloud 2's ground and facade as well as the true
+  pose: scored on every point the two are nearly tied (the ground is most of the cloud);
+  scored on what rises from the ground, the cars tell them apart."""
+  x, y = np.meshgrid(np.arange(-30, 30, 0.2), np.arange(-30, 30, 0.2))
+  ground = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+  xw, zw = np.meshgrid(np.arange(-30, 30, 0.2), np.arange(0.2, 5, 0.2))
+  facade = np.column_stack([xw.ravel(), np.full(xw.size, 8.0), zw.ravel()])
+  cars = np.concatenate([_box(x, 4.0) for x in (-16, -9, -1, 5, 14)])
+  cloud1 = np.concatenate([ground, facade, cars])
+  middle = cloud1[np.abs(cloud1[:, 0]) < 12]
+  cloud2 = middle + np.random.default_rng(0).normal(0, 0.02, middle.shape)   # T_12 = I
+  along = geometry.make_transform(np.eye(3), np.array([10.0, 0.0, 0.0]))
+  candidates = np.stack([along, np.eye(4)])
+  _, _, on_all = verification.verify(cloud1, cloud2, candidates, score_on='all')
+  best, refined, rising = verification.verify(cloud1, cloud2, candidates)
+  assert on_all[1] - on_all[0] < 0.02                      # nearly tied on every point
+  assert best == 1 and rising[1] - rising[0] > 5 * (on_all[1] - on_all[0])
+  assert np.abs(refined[1] - np.eye(4)).max() < 0.02
+  assert np.linalg.norm(refined[0][:3, 3]) > 5.0            # still a pose along the street
+  with pytest.raises(ValueError, match="score_on must be 'rising' or 'all'"):
+    verification.verify(cloud1, cloud2, candidates, score_on='ground')
