@@ -14,7 +14,7 @@ models and the main job's own short run (row "Ours (this run)"). Each table says
 many pairs it used. Expected: ~4 minutes on the 2-core CPU VM (docs/reproduce.md).
 
 The full-size reproduction on the same data (all 53 + 106 pairs, all 2,000 cluster
-pairs; docs/reproduce.md has its time):
+pairs; ~21 minutes on the 2-core CPU VM):
 
     python -m experiments.evaluate --config=configs/reproduce_small.py \
         --config.data_root=data_cache/synthetic_small --workdir=runs/reproduce_full \
