@@ -1,11 +1,13 @@
 """ssd_jax.config_checks: bad config values are named, and stored runs resume only under
 the config they were trained with (old runs with the values they used)."""
 
+import importlib.util
 import json
+from pathlib import Path
 
 import pytest
 
-from ssd_jax import config_checks, config_upgrade
+from ssd_jax import cli, config_checks, config_upgrade
 from ssd_jax.configs import paper
 
 
@@ -96,3 +98,18 @@ def test_config_upgrade_fills_only_missing_keys_with_what_old_runs_used():
   assert config_upgrade.upgrade_synthetic(old_set) == {
       'test_kitti': {'num_scenes': 1, 'random_yaw': False},
       'test_oxford': {'num_scenes': 1, 'sensor': 'spinning', 'line_spacing': 0.2}}
+
+
+def test_every_training_config_of_the_project_passes_its_checks():
+  """Each training config stands alone and is valid as shipped (the docs' commands)."""
+  names = []
+  for path in sorted(Path(cli.configs_dir()).glob('*.py')):
+    spec = importlib.util.spec_from_file_location(f'config_{path.stem}', path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    config = module.get_config() if hasattr(module, 'get_config') else None
+    if config is not None and 'model' in config and 'train' in config:
+      config_checks.check_config(config, num_devices=1)
+      names.append(path.stem)
+  assert {'paper', 'cpu_small', 'cpu_robust', 'cpu_robust_detector', 'feat3dnet_small_varied',
+          'adapt', 'rescan'} <= set(names)
