@@ -113,3 +113,26 @@ def test_verification_scores_what_rises_from_the_ground():
   assert np.linalg.norm(refined[0][:3, 3]) > 5.0            # still a pose along the street
   with pytest.raises(ValueError, match="score_on must be 'rising' or 'all'"):
     verification.verify(cloud1, cloud2, candidates, score_on='ground')
+
+
+def test_a_cloud_with_little_structure_is_scored_on_all_its_points(monkeypatch):
+  """Rolling ground and three thin poles, which stand 1.5 m elsewhere in cloud 2: fewer
+  than MIN_RISING_POINTS points rise from it, so the structure score falls back to every
+  point (the ground fits); with a lower minimum it is the poles' share alone (none fit)."""
+  x, y = np.meshgrid(np.arange(-20, 20, 0.2), np.arange(-20, 20, 0.2))
+  ground = np.column_stack([x.ravel(), y.ravel(),
+                            0.15 * np.sin(x.ravel() / 3) * np.cos(y.ravel() / 4)])
+  poles = np.concatenate([np.column_stack([np.full(20, px), np.full(20, py),
+                                           np.arange(1.0, 5.0, 0.2)])
+                          for px, py in ((-10, 5), (3, -7), (12, 9))])
+  cloud1 = np.concatenate([ground, poles])
+  cloud2 = np.concatenate([ground, poles + np.array([1.5, 0.0, 0.0])])
+  assert bev.rising_from_ground(cloud2).sum() < verification.MIN_RISING_POINTS
+  candidates = np.eye(4)[None]
+  _, _, on_all = verification.verify(cloud1, cloud2, candidates, score_on='all')
+  _, _, fallback = verification.verify(cloud1, cloud2, candidates)
+  assert on_all[0] > 0.99
+  np.testing.assert_allclose(fallback, on_all)
+  monkeypatch.setattr(verification, 'MIN_RISING_POINTS', 10)
+  _, _, on_poles = verification.verify(cloud1, cloud2, candidates)
+  assert on_poles[0] == 0.0

@@ -61,8 +61,9 @@ class Registration:
   inlier_rmse: float = 0.0
   correspondence_set_size: int = 0
   candidates: np.ndarray | None = None   # [k, 4, 4] RANSAC's distinct best poses (`verify`)
-  # After `verify`: the share of cloud 2 within verification.FIT_DISTANCE of cloud 1 under
-  # each candidate, ICP-refined; the transform is the best of them.
+  # After `verify`: per candidate, ICP-refined, the share of cloud 2's structure (what rises
+  # from its ground; `verification.verify`) within FIT_DISTANCE of cloud 1. The transform
+  # is the best of them.
   verified_fitness: np.ndarray | None = None
 
 
@@ -209,7 +210,7 @@ def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1: np.
            points2: np.ndarray, inlier_threshold: float = 1.0,
            bev_candidates: int = 0) -> Registration:
   """`reg` with the candidate pose (`estimate(candidates=k)`) that, refined by ICP, lays the
-  most of cloud 2 [N2, 3] on cloud 1 [N1, 3] (`verification.verify`; the clouds and the
+  most of cloud 2's structure [N2, 3] on cloud 1 [N1, 3] (`verification.verify`; the clouds and the
   features in the same coordinates, metres near the origin). With `bev_candidates` b > 0
   (upright scans), the b best poses of the bird's-eye-view search (`bev.search`) are
   checked after RANSAC's. Inliers and the RegistrationResult numbers are recounted over
