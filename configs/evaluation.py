@@ -17,7 +17,7 @@ def get_config() -> ml_collections.ConfigDict:
   # ssd_jax.pretrained.SHIPPED), an export folder or a training run directory.
   config.checkpoints = ml_collections.ConfigDict({
       'ours': 'ours',                       # self-supervised (configs/cpu_robust.py)
-      # Weakly supervised 3DFeat-Net baseline (configs/feat3dnet_small_varied.py).
+      # Weakly supervised 3DFeat-Net baseline on ours' network (configs/feat3dnet_robust.py).
       'feat3dnet': 'feat3dnet',
       'ours_detector': 'ours_detector',     # self-supervised detector (extension)
   })

@@ -22,7 +22,7 @@ from absl import flags
 
 from ssd_jax import checkpoint, cli, inference, viz
 from ssd_jax.data import io, registration_sets
-from ssd_jax.evaluation import learning_curve, tables
+from ssd_jax.evaluation import learning_curve, registration, tables
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import features
 
@@ -77,13 +77,13 @@ def _describing(model: inference.Model) -> inference.Model:
 def markdown(records: list[dict]) -> str:
   header = ['set', 'run', 'step', 'row', 'pairs', 'success (%)', 'RTE (m)', 'RRE (°)',
             'avg #iter', 'precision @ 1 m (%)'] + [
-                f'success, yaw {lo}-{hi}° (%)' for lo, hi in learning_curve.YAW_BINS]
+                f'success, yaw {lo}-{hi}° (%)' for lo, hi in registration.YAW_BINS]
   order = sorted(records, key=lambda r: (r['set'], r['run'], int(r['step'] or -1)))
   rows = [[r['set'], r['run'] or '-', r['step'] or '-', r['row'], r['pairs'],
            *(tables.fmt(float(r[k]), d) for k, d in (('success', 1), ('rte', 3), ('rre', 2),
                                                      ('trials', 0), ('precision_1m', 1))),
            *(tables.fmt(float(r[f'success_yaw_{lo}_{hi}']), 0)
-             for lo, hi in learning_curve.YAW_BINS)] for r in order]
+             for lo, hi in registration.YAW_BINS)] for r in order]
   return tables.markdown_table(header, rows)
 
 

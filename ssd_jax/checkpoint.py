@@ -18,7 +18,7 @@ import jax
 import ml_collections
 import orbax.checkpoint as ocp
 
-from ssd_jax import distributed, errors
+from ssd_jax import distributed, errors, library_text
 
 # Appended to a damaged step folder's name when training moves it aside: orbax reads
 # only integer step names, and nothing is deleted.
@@ -27,21 +27,6 @@ DAMAGED_SUFFIX = '.damaged'
 
 class CheckpointError(errors.UserError):
   """A checkpoint is missing, damaged (truncated or corrupt files) or unreadable."""
-
-
-def _reason(error: Exception) -> str:
-  """One line of an orbax / tensorstore / JSON error, which may span a hundred."""
-  line = (str(error).strip().splitlines() or [''])[0].split('. See full TensorStore')[0]
-  return f'{type(error).__name__}: {line[:160]}' if line else type(error).__name__
-
-
-def _is_failed_read(unraisable) -> bool:
-  """An orbax array read of a damaged checkpoint, failing after the first one was
-  reported (the coroutine, or the tensorstore error it left in a future)."""
-  name = getattr(unraisable.object, '__qualname__', '') or repr(unraisable.object)
-  text = str(unraisable.exc_value)
-  return ('_read_array' in name or 'Encountered error while reading array' in text
-          or ('OUT_OF_RANGE' in text and 'OCDBT' in text) or 'Event loop is closed' in text)
 
 
 def _drop_failed_reads() -> None:
@@ -55,7 +40,7 @@ def _drop_failed_reads() -> None:
     return
 
   def hook(unraisable):
-    if not _is_failed_read(unraisable):
+    if not library_text.is_failed_array_read(unraisable):
       previous(unraisable)
 
   hook.drops_failed_reads = True
@@ -115,7 +100,7 @@ class Checkpointer:
       return self._manager.restore(step, args=ocp.args.Composite(**items))
     except Exception as e:  # pylint: disable=broad-except
       # orbax surfaces a damaged file as tensorstore, JSON or plain exceptions.
-      reason = _reason(e)
+      reason = library_text.first_line(e)
     gc.collect()
     raise CheckpointError(f'{self._step_path(step)}: damaged checkpoint ({reason})')
 

@@ -30,13 +30,12 @@ import jax
 from jax.experimental import multihost_utils
 import numpy as np
 
+from ssd_jax import library_text
+
 T = TypeVar('T')
 R = TypeVar('R')
 
 _CHILD = '_SSD_JAX_DISTRIBUTED_CHILD'
-# JAX's fatal line when its coordination service gives up on this process.
-_FATAL = re.compile(r'^F\d{4} .*(Terminating process because the JAX distributed service'
-                    r'.*?)(absl::Status: (.*))?$')
 
 
 class DistributedError(RuntimeError):
@@ -112,9 +111,9 @@ def _supervise(address: str, num_processes: int | None, process_id: int | None,
     # tqdm redraws with '\r': pass those through as they come, not at the next '\n'.
     *lines, pending = re.split(rb'(?<=[\r\n])', pending)
     for raw in lines:
-      fatal = _FATAL.match(raw.decode(errors='replace').rstrip('\r\n'))
-      if fatal and status is None:
-        status = fatal.group(3) or fatal.group(1)
+      fatal = library_text.jax_fatal_status(raw.decode(errors='replace'))
+      if fatal is not None and status is None:
+        status = fatal
       # After JAX's fatal line comes only the abort: the C++ and Python stack traces.
       if status is None:
         sys.stderr.buffer.write(raw)
@@ -127,11 +126,12 @@ def _supervise(address: str, num_processes: int | None, process_id: int | None,
     sys.exit(code if code >= 0 else 128 - code)
   who = (f'process {process_id} of {num_processes}' if process_id is not None
          and num_processes is not None else 'this process')
-  if 'DEADLINE_EXCEEDED' in status:
+  kind = library_text.jax_stop_reason(status)
+  if kind == 'never_joined':
     reason = (f'not all {num_processes or "the"} processes joined the coordinator at {address} '
               f'within {timeout_s} s (is the coordinator address right, and did every '
               f'process start with the same --num_processes?)')
-  elif any(k in status for k in ('unhealthy', 'heartbeat', 'Shutdown barrier', 'UNAVAILABLE')):
+  elif kind == 'peer_stopped':
     reason = (f'another process of the run stopped (no heartbeat for {heartbeat_s} s); '
               f'{STOPPED_HINT}')
   else:
@@ -144,19 +144,14 @@ STOPPED_HINT = ('every process stops. Rerun all of them with the same --workdir:
                 'resumes from its last checkpoint')
 
 
-# What a collective or a coordination call says when its peer process is gone.
-_PEER_FAILURE = ('Gloo', 'NCCL', 'Connection reset', 'Connection closed', 'DEADLINE_EXCEEDED',
-                 'UNAVAILABLE', 'heartbeat')
-
-
 def is_peer_failure(error: BaseException) -> bool:
   """True for an error that another process of a multi-process run stopping causes: a
   runtime error of a collective (gloo, NCCL), also when orbax or multihost_utils
   re-raise it as another type."""
   if jax.process_count() == 1:
     return False
-  return isinstance(error, jax.errors.JaxRuntimeError) or any(
-      marker in str(error) for marker in _PEER_FAILURE)
+  return (isinstance(error, jax.errors.JaxRuntimeError)
+          or library_text.names_a_peer_failure(str(error)))
 
 
 def fail(reason: str) -> None:

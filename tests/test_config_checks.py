@@ -112,4 +112,4 @@ def test_every_training_config_of_the_project_passes_its_checks():
       config_checks.check_config(config, num_devices=1)
       names.append(path.stem)
   assert {'paper', 'cpu_small', 'cpu_robust', 'cpu_robust_detector', 'feat3dnet_small_varied',
-          'adapt', 'rescan'} <= set(names)
+          'feat3dnet_robust', 'adapt', 'rescan'} <= set(names)

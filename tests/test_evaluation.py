@@ -139,6 +139,21 @@ def test_describe_clusters_equals_describe_per_cluster():
     inference.describe_clusters(model, [clouds[0], np.full((3, 3), np.nan, np.float32)])
 
 
+def test_success_by_relative_yaw_by_hand():
+  """Pairs turned by 10, 50, 100, 170 and -175 degrees fall in the bins 0-45, 45-90,
+  90-135, 135-180 (twice); a row's success is counted per bin."""
+  pairs = [registration_sets.RegistrationPair('s', 0, i, None, None, np.asarray(
+      geometry.make_transform(np.asarray(geometry.rotation_z(np.radians(yaw))), np.zeros(3))))
+           for i, yaw in enumerate([10.0, 50.0, 100.0, 170.0, -175.0])]
+  ok = lambda *s: [{'success': v} for v in s]
+  results = {'iss+fpfh': ok(True, False, True, True, False), 'iss+ours': ok(*[True] * 5)}
+  header, table = registration.yaw_table(pairs, results, ['iss+fpfh', 'iss+ours', 'iss+x'])
+  assert header[1:] == ['0-45° (1 pairs)', '45-90° (1 pairs)', '90-135° (1 pairs)',
+                        '135-180° (2 pairs)']
+  assert table == [['ISS kpt + FPFH desc', '100.00', '0.00', '100.00', '50.00'],
+                   ['ISS kpt + Ours desc', '100.00', '100.00', '100.00', '100.00']]
+
+
 # ---- reproduce end to end ------------------------------------------------------------------
 
 @pytest.fixture(scope='module')
@@ -174,6 +189,9 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   assert 'Ours: `' in report and '(step 4)' in report
   assert f'3DFeat-Net: `{tmp_path / "none"}` **missing**' in report
   assert '3DFeat-Net keypoints' in report and 'no such checkpoint directory' in report
+  # the paper's four keypoint x descriptor rows say which detector each uses
+  assert "- 3DFeat-Net kpt: 3DFeat-Net's attention, trained by its" in report
+  assert '- Ours (self-sup. detector) kpt: the self-supervised attention' in report
   for png in ('fig4_precision_oxford.png', 'descriptor_matching_roc.png', 'figures_keypoints.png',
               'figures_oxford_iss_ours.png'):
     assert (out / png).stat().st_size > 10_000, png
@@ -302,8 +320,8 @@ def test_learning_curve_rows_resume_and_cli(synthetic_root, tiny_checkpoint, tmp
   res = registration.register_pairs(pairs, ['iss+fpfh'], store, progress=False)['iss+fpfh']
   assert float(records[0]['success']) == pytest.approx(100 * np.mean([r['success'] for r in res]))
   assert float(records[0]['trials']) == pytest.approx(np.mean([r['trials'] for r in res]))
-  yaws = [learning_curve.yaw_bin(learning_curve.relative_yaw_deg(p.transform)) for p in pairs]
-  for b, (lo, hi) in enumerate(learning_curve.YAW_BINS):
+  yaws = [registration.yaw_bin(registration.relative_yaw_deg(p.transform)) for p in pairs]
+  for b, (lo, hi) in enumerate(registration.YAW_BINS):
     assert int(records[0][f'pairs_yaw_{lo}_{hi}']) == yaws.count(b)
   # The learned row is the registration table's row of that checkpoint.
   store.models['tiny4'] = inference.load(tiny_checkpoint, 4)

@@ -14,6 +14,7 @@ import pytest
 from scipy import spatial
 
 from ssd_jax import augment, config_checks, geometry, inference, objective, train
+from ssd_jax.configs import cpu_robust, feat3dnet_robust
 from ssd_jax.data import clean, datasets, io, kitti
 from ssd_jax.evaluation import orientation, repeatability, triplets
 
@@ -324,3 +325,51 @@ def test_reference_augmentations_act_per_cloud():
   assert np.abs(moved).max() <= 0.1 + 1e-6
   np.testing.assert_allclose(moved, np.broadcast_to(moved[:, :1], moved.shape), atol=1e-5)
   assert not np.allclose(moved[0, 0], moved[1, 0])
+
+
+def test_rotate_1d_draws_over_the_whole_circle():
+  """Rotate1D turns each cloud by a uniform angle in [-180, 180) degrees: every quarter of
+  the circle gets about a quarter of 4,000 clouds, and turns beyond +-170 degrees occur."""
+  pts = jnp.tile(jnp.array([[[1.0, 0.0, 0.0]]]), (4000, 1, 1))
+  turned = np.asarray(augment.rotate_1d(jax.random.key(0), pts))[:, 0]
+  angle = np.degrees(np.arctan2(turned[:, 1], turned[:, 0]))
+  quarters = np.histogram(angle, bins=[-180, -90, 0, 90, 180])[0] / len(angle)
+  np.testing.assert_allclose(quarters, 0.25, atol=0.03)
+  assert np.abs(angle).max() > 170.0
+
+
+@pytest.mark.parametrize('head', ['mlp', 'equivariant'])
+def test_triplet_loss_reaches_the_orientation_head_in_stage_2(tiny_config, head):
+  """Stage 2's triplet loss (Rotate1D on) gives the orientation head's weights a gradient,
+  for 3DFeat-Net's MLP head and for the head that turns with the cluster."""
+  config = tiny_config
+  config.objective = 'triplet'
+  config.model.orientation_head = head
+  config.model.augmentations = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
+  model = train.create_model(config)
+  state = train.create_train_state(config, jax.random.key(0))
+  rng = np.random.default_rng(0)
+  pts = jnp.asarray(rng.uniform(-8, 8, (2, 3, 512, 3)) * [1, 1, 0.25], jnp.float32)
+
+  def loss(params):
+    variables = {'params': params, 'batch_stats': state.batch_stats}
+    return objective.triplet_loss(model, variables, jax.random.key(1), pts,
+                                  jnp.ones(pts.shape[:3], bool), config.model)[0]
+  grads = jax.grad(loss)(state.params)['detector']['orientation']
+  assert all(float(jnp.abs(g).max()) > 1e-7 for g in jax.tree.leaves(grads))
+
+
+def test_architecture_matched_baseline_shares_ours_network_and_budget():
+  """configs/feat3dnet_robust.py trains `ours`' network (configs/cpu_robust.py) on the same
+  clouds for the same steps; only the objective and its augmentations differ."""
+  ours, baseline = cpu_robust.get_config(), feat3dnet_robust.get_config()
+  assert baseline.objective == 'triplet' and ours.objective != 'triplet'
+  for key in ('radius', 'orientation_head', 'num_clusters', 'num_samples', 'descriptor_dim'):
+    assert baseline.model[key] == ours.model[key], key
+  for section, key in (('data', 'path'), ('data', 'num_points'), ('train', 'num_steps'),
+                       ('train', 'lr_schedule'), ('train', 'learning_rate')):
+    assert baseline[section][key] == ours[section][key], (section, key)
+  assert baseline.inference.to_dict() == ours.inference.to_dict()
+  assert 'rotate_1d' in baseline.model.augmentations
+  config_checks.check_config(baseline)
+  config_checks.check_config(feat3dnet_robust.get_config('pretrain'))

@@ -10,7 +10,7 @@ from scipy import spatial
 
 from ssd_jax import geometry
 from ssd_jax.data import datasets, io, registration_sets, rescan
-from ssd_jax.evaluation import learning_curve
+from ssd_jax.evaluation import registration
 from tests.conftest import shared_path
 
 
@@ -59,7 +59,7 @@ def test_rescan_set_is_deterministic_and_covers_every_yaw_bin(tmp_path):
   np.testing.assert_array_equal(np.sort(np.floor((yaws + 180) / 45)), np.arange(8))
   pairs = registration_sets.read_registration_set(tmp_path / 'a')
   assert len(pairs) == 8
-  bins = [learning_curve.yaw_bin(learning_curve.relative_yaw_deg(p.transform)) for p in pairs]
+  bins = [registration.yaw_bin(registration.relative_yaw_deg(p.transform)) for p in pairs]
   assert sorted(bins) == [0, 0, 1, 1, 2, 2, 3, 3]
 
 

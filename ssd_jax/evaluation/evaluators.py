@@ -103,7 +103,7 @@ def _registration(name, ev, ctx: Context) -> Section:
         inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
         max_trials=cfg.max_trials, log=log, desc=name)
   return Section(ev.title, report.registration_outputs(
-      results, rows, ctx.missing, str(ctx.workdir), ev.paper, description, name))
+      pairs, results, rows, ctx.missing, str(ctx.workdir), ev.paper, description, name))
 
 
 def _cross_sensor(name, ev, ctx: Context) -> Section:
@@ -304,12 +304,20 @@ def _evaluate(config: ml_collections.ConfigDict, workdir: Path, command: str,
     raise errors.UserError(f'nothing to evaluate under {ctx.data_root}: ' + '; '.join(skipped))
   path = workdir / 'report.md'
   path.write_text(_report(config, ctx, sections, skipped, seconds,
+                          _keypoint_sources(config, ran),
                           [name for name, kind in ran if kind == 'registration'], command))
   return path, '\n\n'.join(f'## {s.title}\n\n{s.text.strip()}' for s in sections)
 
 
+def _keypoint_sources(config, ran: Sequence[tuple[str, str]]) -> set[str]:
+  """The keypoint sources of the rows the evaluations that ran computed."""
+  return {feature_store.split_row(row)[0] for name, kind in ran
+          for row in EVALUATORS[kind].rows(config, config.evals[name])}
+
+
 def _report(config, ctx: Context, sections: Sequence[Section], skipped: Sequence[str],
-            seconds: dict, registration_names: Sequence[str], command: str) -> str:
+            seconds: dict, keypoint_sources: set[str], registration_names: Sequence[str],
+            command: str) -> str:
   lines = ['# ssd_jax: evaluation report', '',
            f'Generated {datetime.datetime.now().isoformat(timespec="seconds")} by',
            f'`{command or "ssd_jax.evaluation.evaluators.evaluate"}`',
@@ -320,6 +328,11 @@ def _report(config, ctx: Context, sections: Sequence[Section], skipped: Sequence
     lines.append(f'- {feature_store.NAMES.get(name, name)}: `{path}` ' +
                  (f'(step {model.step})' if model is not None else
                   f'**missing**: {ctx.missing.get(name, "not used by any row")}'))
+  detectors = sorted(set(keypoint_sources) & set(feature_store.DETECTORS))
+  if detectors:
+    lines += ['', 'Keypoint rows named after a checkpoint use its detector:', '']
+    lines += [f'- {feature_store.NAMES.get(name, name)} kpt: {feature_store.DETECTORS[name]}.'
+              for name in detectors]
   lines += ['', '## Skipped', '']
   lines += [f'- {s}' for s in skipped] or ['- nothing']
   for s in sections:

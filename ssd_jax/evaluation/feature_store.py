@@ -28,6 +28,15 @@ NAMES = {'iss': 'ISS', 'random': 'random', 'auto': 'farthest-point', 'fpfh': 'FP
          'ours': 'Ours',
          'feat3dnet': '3DFeat-Net', 'ours_detector': 'Ours (self-sup. detector)',
          'ours_run': 'Ours (this run)'}
+# What a keypoint row named after a checkpoint detects with: that network's attention,
+# highest first after 0.5 m non-maximum suppression (`keypoints.detect`).
+DETECTORS = {
+    'feat3dnet': "3DFeat-Net's attention, trained by its attention-weighted triplet loss",
+    'ours_detector': 'the self-supervised attention, trained by CF with weights '
+                     'w_ij * a_i * b_j (model.attention_in_cf)',
+    'ours': "an attention the paper's CF loss never trains (it gets no gradient)",
+    'ours_run': "an attention the paper's CF loss never trains (it gets no gradient)",
+}
 
 
 # A row's part 'verify': RANSAC's distinct best poses checked against the clouds

@@ -16,24 +16,12 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ssd_jax import geometry
 from ssd_jax.evaluation import feature_store, precision, registration
 from ssd_jax.registration import features as features_lib
 
-YAW_BINS = ((0, 45), (45, 90), (90, 135), (135, 180))   # |relative yaw|, degrees
 COLUMNS = (('run', 'step', 'set', 'row', 'pairs', 'success', 'rte', 'rre', 'rre_geodesic', 'trials',
-            'precision_1m') + tuple(f'success_yaw_{lo}_{hi}' for lo, hi in YAW_BINS)
-           + tuple(f'pairs_yaw_{lo}_{hi}' for lo, hi in YAW_BINS))
-
-
-def relative_yaw_deg(transform: np.ndarray) -> float:
-  """|rotation about z| of T [4, 4] in degrees, in [0, 180]."""
-  return float(abs(geometry.yaw_deg(np.asarray(transform))))
-
-
-def yaw_bin(yaw: float) -> int:
-  """Index into YAW_BINS of an absolute yaw in [0, 180] degrees."""
-  return min(int(yaw // 45), len(YAW_BINS) - 1)
+            'precision_1m') + tuple(f'success_yaw_{lo}_{hi}' for lo, hi in registration.YAW_BINS)
+           + tuple(f'pairs_yaw_{lo}_{hi}' for lo, hi in registration.YAW_BINS))
 
 
 def summarize_row(pairs: Sequence, results: Sequence[dict], precision_curve: np.ndarray
@@ -44,12 +32,10 @@ def summarize_row(pairs: Sequence, results: Sequence[dict], precision_curve: np.
   out = {'pairs': s['pairs'], 'success': 100 * s['success_rate'], 'rte': s['rte'],
          'rre': s['rre'], 'rre_geodesic': s['rre_geodesic'], 'trials': s['trials'],
          'precision_1m': 100 * precision.value_at(precision_curve, 1.0)}
-  bins = np.array([yaw_bin(relative_yaw_deg(p.transform)) for p in pairs])
-  ok = np.array([r['success'] for r in results])
-  for b, (lo, hi) in enumerate(YAW_BINS):
-    sel = bins == b
-    out[f'pairs_yaw_{lo}_{hi}'] = int(sel.sum())
-    out[f'success_yaw_{lo}_{hi}'] = 100 * float(ok[sel].mean()) if sel.any() else float('nan')
+  for (lo, hi), (n, success) in zip(registration.YAW_BINS,
+                                    registration.success_by_yaw(pairs, results)):
+    out[f'pairs_yaw_{lo}_{hi}'] = n
+    out[f'success_yaw_{lo}_{hi}'] = success
   return out
 
 

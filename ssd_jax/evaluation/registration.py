@@ -10,7 +10,7 @@ import jax
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import distributed
+from ssd_jax import distributed, geometry
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import feature_store, paper, tables
 from ssd_jax.registration import metrics, pipeline
@@ -105,4 +105,41 @@ def registration_table(results: Mapping[str, list[dict]], rows: Sequence[str],
     else:
       table.append([feature_store.row_label(row), 'missing', '-', '-', '-', '-', '-',
                     f'{ref} ({feature_store.missing_reason(row, missing)})'])
+  return header, table
+
+
+YAW_BINS = ((0, 45), (45, 90), (90, 135), (135, 180))   # |relative yaw|, degrees
+
+
+def relative_yaw_deg(transform: np.ndarray) -> float:
+  """|rotation about z| of T [4, 4] in degrees, in [0, 180]."""
+  return float(abs(geometry.yaw_deg(np.asarray(transform))))
+
+
+def yaw_bin(yaw: float) -> int:
+  """Index into YAW_BINS of an absolute yaw in [0, 180] degrees."""
+  return min(int(yaw // 45), len(YAW_BINS) - 1)
+
+
+def _yaw_bins(pairs: Sequence) -> np.ndarray:
+  return np.array([yaw_bin(relative_yaw_deg(p.transform)) for p in pairs], int)
+
+
+def success_by_yaw(pairs: Sequence, results: Sequence[dict]) -> list[tuple[int, float]]:
+  """Per bin of YAW_BINS: (pairs in the bin, success in percent; NaN for an empty bin)."""
+  bins = _yaw_bins(pairs)
+  ok = np.array([r['success'] for r in results], bool)
+  return [(int((bins == b).sum()), 100 * float(ok[bins == b].mean()) if (bins == b).any()
+           else float('nan')) for b in range(len(YAW_BINS))]
+
+
+def yaw_table(pairs: Sequence, results: Mapping[str, list[dict]], rows: Sequence[str]):
+  """-> (header, table rows): each row's success per bin of the pairs' relative yaw, the
+  bin's pair count in the header; rows that did not run are left out."""
+  counts = np.bincount(_yaw_bins(pairs), minlength=len(YAW_BINS))
+  header = ['keypoints + descriptor'] + [f'{lo}-{hi}° ({n} pairs)'
+                                         for (lo, hi), n in zip(YAW_BINS, counts)]
+  table = [[feature_store.row_label(row)] + [tables.fmt(v) if n else '-'
+                                             for n, v in success_by_yaw(pairs, results[row])]
+           for row in rows if row in results]
   return header, table

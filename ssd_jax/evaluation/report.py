@@ -19,14 +19,19 @@ def _write(workdir: str, name: str, text: str) -> None:
     f.write(text)
 
 
-def registration_outputs(results: Mapping[str, list], rows: Sequence[str],
+def registration_outputs(pairs: Sequence, results: Mapping[str, list], rows: Sequence[str],
                          missing: Mapping[str, str], workdir: str, paper_set: str,
                          description: str, name: str = 'registration') -> str:
-  """WORKDIR/{name}.md and .csv: the Table I / II layout."""
+  """WORKDIR/{name}.md and .csv: the Table I / II layout; {name}_yaw.csv: success per bin
+  of the pairs' relative yaw."""
   header, table = registration.registration_table(results, rows, missing, paper_set)
+  yaw_header, yaw_rows = registration.yaw_table(pairs, results, rows)
+  tables.write_csv(os.path.join(workdir, f'{name}_yaw.csv'), yaw_header, yaw_rows)
   text = (f'Registration on {description}. RTE / RRE over successful pairs (RTE < 2 m, '
           'Euler-sum RRE < 5°); success and #iter over all pairs.\n\n' +
-          tables.markdown_table(header, table))
+          tables.markdown_table(header, table) +
+          '\nSuccess (%) by the pair\'s relative yaw:\n\n' +
+          tables.markdown_table(yaw_header, yaw_rows))
   _write(workdir, f'{name}.md', text)
   tables.write_csv(os.path.join(workdir, f'{name}.csv'), header, table)
   return text
