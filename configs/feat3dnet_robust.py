@@ -6,6 +6,7 @@ Commands (after the README's main job made data_cache/synthetic_small):
         --workdir=runs/feat3dnet_robust_pretrain
     python -m experiments.train --config=configs/feat3dnet_robust.py \
         --workdir=runs/feat3dnet_robust
+    python -m experiments.export --run=runs/feat3dnet_robust --out=ssd_jax/weights/feat3dnet
 
 The paper compares two ways of training one network, 3DFeat-Net's: its weak supervision
 (triplets from poses) and the paper's self-supervision (CF on a cloud and its own turned
@@ -29,8 +30,9 @@ yaw, 100 % of the push-broom Oxford-style pairs and 96.2 % of the real re-scans
 
 Why this head: with 3DFeat-Net's MLP head (configs/feat3dnet_small_varied.py) the
 orientation does not learn to turn with the cloud within CPU-length runs (median error
-~110 degrees, 90 = unrelated), and the baseline registers turned pairs at chance
-(docs/feat3dnet_baseline.md, "Why it fails at large yaw").
+~110 degrees, 90 = unrelated), and the baseline registers few pairs turned by more than
+45 degrees (docs/feat3dnet_baseline.md, "Why 3DFeat-Net's own orientation head fails at
+large yaw").
 """
 
 from ssd_jax.configs import cpu_robust
