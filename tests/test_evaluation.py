@@ -192,6 +192,10 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
   # the paper's four keypoint x descriptor rows say which detector each uses
   assert "- 3DFeat-Net kpt: 3DFeat-Net's attention, trained by its" in report
   assert '- Ours (self-sup. detector) kpt: the self-supervised attention' in report
+  # each registration table is followed by its success per bin of relative yaw
+  assert report.count("Success (%) by the pair's relative yaw") == 2
+  yaw = _csv(out / 'table1_oxford_yaw.csv')
+  assert yaw[0][0] == 'keypoints + descriptor' and yaw[1][0] == 'ISS kpt + FPFH desc'
   for png in ('fig4_precision_oxford.png', 'descriptor_matching_roc.png', 'figures_keypoints.png',
               'figures_oxford_iss_ours.png'):
     assert (out / png).stat().st_size > 10_000, png

@@ -30,12 +30,13 @@ NAMES = {'iss': 'ISS', 'random': 'random', 'auto': 'farthest-point', 'fpfh': 'FP
          'ours_run': 'Ours (this run)'}
 # What a keypoint row named after a checkpoint detects with: that network's attention,
 # highest first after 0.5 m non-maximum suppression (`keypoints.detect`).
+_UNTRAINED_ATTENTION = "an attention the paper's CF loss never trains (it gets no gradient)"
 DETECTORS = {
     'feat3dnet': "3DFeat-Net's attention, trained by its attention-weighted triplet loss",
     'ours_detector': 'the self-supervised attention, trained by CF with weights '
                      'w_ij * a_i * b_j (model.attention_in_cf)',
-    'ours': "an attention the paper's CF loss never trains (it gets no gradient)",
-    'ours_run': "an attention the paper's CF loss never trains (it gets no gradient)",
+    'ours': _UNTRAINED_ATTENTION,
+    'ours_run': _UNTRAINED_ATTENTION,
 }
 
 

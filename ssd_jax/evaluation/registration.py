@@ -129,7 +129,7 @@ def success_by_yaw(pairs: Sequence, results: Sequence[dict]) -> list[tuple[int, 
   """Per bin of YAW_BINS: (pairs in the bin, success in percent; NaN for an empty bin)."""
   bins = _yaw_bins(pairs)
   ok = np.array([r['success'] for r in results], bool)
-  return [(int((bins == b).sum()), 100 * float(ok[bins == b].mean()) if (bins == b).any()
+  return [(int(ok[bins == b].size), 100 * float(ok[bins == b].mean()) if (bins == b).any()
            else float('nan')) for b in range(len(YAW_BINS))]
 
 
