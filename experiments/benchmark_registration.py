@@ -22,7 +22,12 @@ with its tutorial's (1 m / 30-neighbour normals, FPFH capped at 100 neighbours):
     tile), registered by the command a user types with its defaults (the cloud put on
     the model's 0.2 m grid first) in a new process, with its peak memory; Open3D's
     pipeline on the same clouds after Open3D's own `voxel_down_sample(0.2)` (its
-    tutorial's first step; on millions of raw points its ISS does not finish).
+    tutorial's first step; on millions of raw points its ISS does not finish);
+  * map tile (`--tile=N`): an accumulated tile of N points, 5 x 5 copies of the first
+    pair's cloud 1 on a 40 m grid, each turned by its own yaw so that no shift maps the
+    tile onto itself, every point copied with 5 cm jitter; cloud 2 is a second draw of
+    that tile moved by the pair's inverse transform (its ground truth: the pair's). The
+    register command with its defaults in a new process, wall time and peak memory.
 
 Prints one table: seconds per pair for features (both clouds), matching, RANSAC and
 the total, and the success rate (RTE < 2 m, RRE < 5 degrees).
@@ -57,6 +62,8 @@ flags.DEFINE_list('draws', [], 'Learned rows: one per value, describing with thi
                   "samplings of each ball (default: the shipped model's own setting).")
 flags.DEFINE_integer('dense', 0, 'Points per cloud of the dense regime (0: no dense rows), '
                      'e.g. 2000000.')
+flags.DEFINE_integer('tile', 0, 'Points per cloud of the map-tile regime (0: none), e.g. '
+                     '20000000.')
 flags.DEFINE_list('methods', ['fpfh', 'learned', 'open3d_paper', 'open3d_tutorial'],
                   "Rows: fpfh (the project's ISS + FPFH), learned (ISS + ours), open3d_paper "
                   "and open3d_tutorial (the plain Open3D pipeline with the paper's or its "
@@ -126,33 +133,67 @@ def _densify(path, n: int, out: str, seed: int) -> str:
   return out
 
 
+def _tile(path, n: int, out: str, seed: int, transform: np.ndarray) -> str:
+  """The map tile of the module docstring, n points, moved by `transform` (.bin in OUT)."""
+  rng = np.random.default_rng(seed)
+  pts = _read(path)
+  pts = pts - pts.mean(0)
+  angles = np.random.default_rng(0).uniform(-np.pi, np.pi, 25)   # the same tile each draw
+  copies = []
+  for k, angle in enumerate(angles):
+    c, s = np.cos(angle), np.sin(angle)
+    shift = np.array([40.0 * (k % 5 - 2), 40.0 * (k // 5 - 2), 0.0])
+    copies.append(pts @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + shift)
+  tile = np.concatenate(copies)
+  chunks = []
+  for lo in range(0, n, 5_000_000):    # bounded temporaries at any n
+    idx = rng.integers(0, len(tile), min(n - lo, 5_000_000))
+    chunk = tile[idx] + rng.normal(0.0, 0.05, (len(idx), 3))
+    chunks.append((chunk @ transform[:3, :3].T + transform[:3, 3]).astype(np.float32))
+  np.concatenate(chunks).tofile(out)
+  return out
+
+
+def _register_row(paths, descriptor: str, label: str, regime: str, transform, tmp: str):
+  """The register command with its defaults in a new process: a row with its wall time,
+  its own peak memory and its success against `transform`."""
+  root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+  out_json = os.path.join(tmp, f'{descriptor}.json')
+  with open(os.path.join(tmp, 'stderr'), 'w+') as err:
+    t0 = time.perf_counter()
+    child = subprocess.Popen([sys.executable, '-m', 'experiments.register',
+                              f'--cloud1={paths[0]}', f'--cloud2={paths[1]}',
+                              f'--descriptor={descriptor}', f'--json={out_json}'], cwd=root,
+                             stdout=subprocess.DEVNULL, stderr=err)
+    _, status, usage = os.wait4(child.pid, 0)   # this child's own peak memory
+    wall = time.perf_counter() - t0
+    if status:
+      err.seek(0)
+      raise SystemExit(f'error: the {regime} {descriptor} run failed: {err.read().strip()[-300:]}')
+  with open(out_json) as f:
+    t = np.array(json.load(f)['T_12'])
+  return (f'register defaults, {descriptor} ({label})',
+          f'{regime}: 1 pair, new process, peak {usage.ru_maxrss / 2**20:.2f} GiB', 1,
+          {'total': wall}, metrics.registration_errors(transform, t)['success'])
+
+
+def _tile_rows(pair, n: int) -> list:
+  """The map-tile regime's rows (see the module docstring)."""
+  with tempfile.TemporaryDirectory() as tmp:
+    paths = [_tile(pair.cloud1, n, os.path.join(tmp, f'tile{k}.bin'), k, transform)
+             for k, transform in enumerate((np.eye(4), np.linalg.inv(pair.transform)))]
+    return [_register_row(paths, d, f'{n:,}-point tile per cloud', 'map tile', pair.transform,
+                          tmp) for d in ('learned', 'fpfh') if d in FLAGS.methods]
+
+
 def _dense_rows(pair, n: int) -> list:
   """The dense regime's rows (see the module docstring)."""
   rows = []
   with tempfile.TemporaryDirectory() as tmp:
     paths = [_densify(c, n, os.path.join(tmp, f'dense{k}.bin'), k)
              for k, c in enumerate((pair.cloud1, pair.cloud2))]
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    for descriptor in ('learned', 'fpfh'):
-      if descriptor not in FLAGS.methods:
-        continue
-      out_json = os.path.join(tmp, f'{descriptor}.json')
-      with open(os.path.join(tmp, 'stderr'), 'w+') as err:
-        t0 = time.perf_counter()
-        child = subprocess.Popen([sys.executable, '-m', 'experiments.register',
-                                  f'--cloud1={paths[0]}', f'--cloud2={paths[1]}',
-                                  f'--descriptor={descriptor}', f'--json={out_json}'], cwd=root,
-                                 stdout=subprocess.DEVNULL, stderr=err)
-        _, status, usage = os.wait4(child.pid, 0)   # this child's own peak memory
-        wall = time.perf_counter() - t0
-        if status:
-          err.seek(0)
-          raise SystemExit(f'error: the dense {descriptor} run failed: {err.read().strip()[-300:]}')
-      with open(out_json) as f:
-        t = np.array(json.load(f)['T_12'])
-      rows.append((f'register defaults, {descriptor} ({n:,} points per cloud)',
-                   f'dense: 1 pair, new process, peak {usage.ru_maxrss / 2**20:.2f} GiB', 1,
-                   {'total': wall}, metrics.registration_errors(pair.transform, t)['success']))
+    rows += [_register_row(paths, d, f'{n:,} points per cloud', 'dense', pair.transform, tmp)
+             for d in ('learned', 'fpfh') if d in FLAGS.methods]
     if 'open3d_tutorial' in FLAGS.methods:
       t0 = time.perf_counter()
       clouds = [preprocess.voxel_downsample(_read(p), 0.2, np.float64) for p in paths]
@@ -208,6 +249,8 @@ def main(argv):
                  float(np.mean(success))))
   if FLAGS.dense > 0:
     rows += _dense_rows(pairs[0], FLAGS.dense)
+  if FLAGS.tile > 0:
+    rows += _tile_rows(pairs[0], FLAGS.tile)
   print(f'\n{FLAGS.dataset}; seconds per pair (mean)\n')
   print('| method | regime | pairs | features | matching | RANSAC | total | success |')
   print('|---|---|---|---|---|---|---|---|')

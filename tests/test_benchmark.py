@@ -30,19 +30,21 @@ def test_train_step_benchmark_times_a_compiled_step():
 @pytest.mark.multiprocess
 @pytest.mark.slow
 def test_registration_benchmark_prints_every_regime_with_the_dense_one(synthetic_root):
-  """The registration benchmark's table has the cold, warm, batch and dense rows of a
-  method; the dense row registers a pair densified to 100,000 points per cloud (put on
-  the grid by the command) and reports that run's own peak memory."""
+  """The registration benchmark's table has the cold, warm, batch, dense and map-tile rows
+  of a method; the dense row registers a pair densified to 100,000 points per cloud (put
+  on the grid by the command) and reports that run's own peak memory; the tile row a
+  pair of 25-scan tiles of 50,000 points, moved by the pair's transform."""
   out = subprocess.run([sys.executable, '-m', 'experiments.benchmark_registration',
                         f'--dataset={synthetic_root / "test_kitti"}', '--num_pairs=2',
-                        '--cold_pairs=1', '--methods=fpfh', '--dense=100000'],
+                        '--cold_pairs=1', '--methods=fpfh', '--dense=100000', '--tile=50000'],
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
   assert out.returncode == 0, out.stderr[-3000:]
   rows = [l for l in out.stdout.splitlines() if l.startswith('| project') or
           l.startswith('| register')]
   regimes = [r.split(' | ')[1] for r in rows]
-  assert [g.split(':')[0] for g in regimes] == ['cold', 'warm', 'batch', 'dense'], rows
-  dense = rows[-1]
+  assert [g.split(':')[0] for g in regimes] == ['cold', 'warm', 'batch', 'dense', 'map tile'], rows
+  dense, tile = rows[-2:]
   assert '100,000 points per cloud' in dense and dense.endswith('| 100 % |'), dense
+  assert '50,000-point tile per cloud' in tile and tile.endswith('| 100 % |'), tile
   peak = float(dense.split('peak ')[1].split(' GiB')[0])
   assert 0.1 < peak < 2.0

@@ -54,6 +54,39 @@ def test_search_finds_a_pose_turned_and_shifted_anywhere_on_a_real_scan():
 
 
 @pytest.mark.real_data
+def test_search_is_unchanged_by_points_no_yaw_brings_into_the_image():
+  """Walls 130-140 m from cloud 2's centre (a map tile's far side; the image's corners are
+  extent * sqrt(2) = 90.5 m away) leave every pose and score as they were."""
+  cloud1, cloud2, _ = _pair(137.0, [14.0, -9.0, 0.3])
+  centre = np.append(np.median(cloud2[:, :2], 0), 0.0)
+  wall = np.stack(np.meshgrid(np.arange(0, 10, 0.2), [0.0], np.arange(0, 3, 0.2)), -1)
+  # One wall past each corner: every coordinate's median stays where it was.
+  far = [wall.reshape(-1, 3) + centre + [sx * 95.0, sy * 95.0, 0.0]
+         for sx in (-1, 1) for sy in (-1, 1)]
+  plain = bev.search(cloud1, cloud2, k=3, yaw_step=30.0)
+  tiled = bev.search(cloud1, np.concatenate([cloud2, *far]), k=3, yaw_step=30.0)
+  np.testing.assert_array_equal(plain.transforms, tiled.transforms)
+  np.testing.assert_array_equal(plain.scores, tiled.scores)
+
+
+@pytest.mark.real_data
+def test_search_and_verification_use_a_stride_of_a_cloud_past_their_budgets(monkeypatch):
+  """A map tile's grid is imaged and aligned to on an even stride of its points
+  (bev.MAX_POINTS, verification.TARGET_POINTS): with both a quarter of the scan, the BEV
+  search's best pose is as close and the verified pose as exact as on every point."""
+  cloud1, cloud2, t_true = _pair(137.0, [14.0, -9.0, 0.3])
+  monkeypatch.setattr(bev, 'MAX_POINTS', len(cloud2) // 4)
+  monkeypatch.setattr(verification, 'TARGET_POINTS', len(cloud1) // 4)
+  found = bev.search(cloud1, cloud2, k=3)
+  assert metrics.registration_errors(t_true, found.transforms[0])['rre_geodesic'] < (
+      bev.YAW_STEP / 2 + 0.1)
+  assert np.linalg.norm(found.transforms[0][:2, 3] - t_true[:2, 3]) < bev.RESOLUTION
+  best, refined, _ = verification.verify(cloud1, cloud2, found.transforms)
+  err = metrics.registration_errors(t_true, refined[best])
+  assert err['rte'] < 0.1 and err['rre_geodesic'] < 0.3, err
+
+
+@pytest.mark.real_data
 def test_verification_with_bev_candidates_registers_where_every_ransac_pose_is_wrong():
   """RANSAC's candidates all 8 m off; the BEV search's poses join the check, and the
   verified pose is exact."""

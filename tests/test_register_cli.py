@@ -46,7 +46,7 @@ def test_register_cli_fpfh_on_a_synthetic_pair(tiny_set, tmp_path):
   pair = registration_sets.read_registration_set(folder)[0]
   out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
              f'--groundtruth={folder / "groundtruths.txt"}', f'--json={tmp_path / "new" / "r.json"}',
-             f'--plot={tmp_path / "r.png"}', '--fpfh_max_nn=200')
+             f'--plot={tmp_path / "r.png"}', '--descriptor=fpfh', '--fpfh_max_nn=200')
   assert out.returncode == 0, out.stderr[-3000:]
   result = json.loads((tmp_path / 'new' / 'r.json').read_text())
   t = np.array(result['T_12'])
@@ -90,12 +90,12 @@ def test_register_cli_errors(tiny_set, tmp_path):
 
 @pytest.mark.multiprocess
 @pytest.mark.slow
-def test_register_cli_learned_uses_the_shipped_model(tiny_set, tmp_path):
-  """No --checkpoint: the shipped `ours` model describes, and the pair registers."""
+def test_register_cli_describes_with_the_shipped_model_by_default(tiny_set, tmp_path):
+  """No --descriptor, no --checkpoint: the shipped `ours` model describes, the pair registers."""
   folder = tiny_set / 'test_kitti' / '00'
   pair = registration_sets.read_registration_set(folder)[0]
   out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
-             '--descriptor=learned', f'--groundtruth={folder / "groundtruths.txt"}',
+             f'--groundtruth={folder / "groundtruths.txt"}',
              f'--json={tmp_path / "r.json"}')
   assert out.returncode == 0, out.stderr[-3000:]
   result = json.loads((tmp_path / 'r.json').read_text())
@@ -214,9 +214,9 @@ def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set
                    geometry.make_transform(np.eye(3), utm) @ pair.transform @
                    geometry.make_transform(np.eye(3), -utm)),
   }
-  cases = [[f'--cloud1={path}', f'--cloud2={good}'] for path, _ in bad.values()]
+  cases = [[f'--cloud1={path}', f'--cloud2={good}', '--descriptor=fpfh'] for path, _ in bad.values()]
   cases += [[f'--cloud1={a}', f'--cloud2={b}', f'--json={tmp_path / f"{i}.json"}',
-             '--fpfh_max_nn=200'] for i, (a, b, _) in enumerate(good_pairs.values())]
+             '--descriptor=fpfh', '--fpfh_max_nn=200'] for i, (a, b, _) in enumerate(good_pairs.values())]
   run = subprocess.run([sys.executable, '-c', _FUZZ_DRIVER, json.dumps(cases)], cwd=ROOT,
                        capture_output=True, text=True, timeout=900)
   assert run.returncode == 0, run.stderr[-3000:]
@@ -266,7 +266,7 @@ def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
   for p in scans:
     (seq / p.name).write_bytes(p.read_bytes())
   out = _run('experiments.register', f'--sequence={seq}', f'--out={tmp_path / "seq"}',
-             f'--groundtruth={folder / "groundtruths.txt"}', '--fpfh_max_nn=200')
+             f'--groundtruth={folder / "groundtruths.txt"}', '--descriptor=fpfh', '--fpfh_max_nn=200')
   assert out.returncode == 0, out.stderr[-3000:]
   rows = list(csv.DictReader((tmp_path / 'seq' / 'registrations.csv').open()))
   assert [(r['cloud1'], r['cloud2']) for r in rows] == [
@@ -283,7 +283,7 @@ def test_batch_mode_registers_a_sequence_and_a_pair_list(tiny_set, tmp_path):
   (tmp_path / 'pairs.txt').write_text(f'# first pair\n{listed.cloud1} {listed.cloud2}\n')
   out = _run('experiments.register', f'--pairs={tmp_path / "pairs.txt"}',
              f'--out={tmp_path / "list"}', f'--groundtruth={folder / "groundtruths.txt"}',
-             '--fpfh_max_nn=200')
+             '--descriptor=fpfh', '--fpfh_max_nn=200')
   assert out.returncode == 0, out.stderr[-3000:]
   (row,) = csv.DictReader((tmp_path / 'list' / 'registrations.csv').open())
   assert row['success'] == 'True' and int(row['inliers']) >= 3
@@ -313,7 +313,7 @@ def test_las_and_laz_register_like_the_same_points_in_ply(tiny_set, tmp_path):
   for ext in ('las', 'laz', 'ply'):
     out = _run('experiments.register', f'--cloud1={tmp_path / f"c0.{ext}"}',
                f'--cloud2={tmp_path / f"c1.{ext}"}', f'--json={tmp_path / f"{ext}.json"}',
-               '--fpfh_max_nn=200')
+               '--descriptor=fpfh', '--fpfh_max_nn=200')
     assert out.returncode == 0, out.stderr[-3000:]
     results[ext] = json.loads((tmp_path / f'{ext}.json').read_text())
   np.testing.assert_allclose(results['las']['T_12'], results['ply']['T_12'], atol=1e-6)
@@ -342,7 +342,7 @@ def test_register_puts_dense_clouds_on_the_grid_and_voxel_0_keeps_every_point(ti
   counts = [8 * len(io.read_cloud(p)) for p in (pair.cloud1, pair.cloud2)]
   for voxel, name in ((None, 'grid'), (0, 'all')):
     out = _run('experiments.register', f'--cloud1={paths[0]}', f'--cloud2={paths[1]}',
-               f'--json={tmp_path / name}.json', '--fpfh_max_nn=200',
+               f'--json={tmp_path / name}.json', '--descriptor=fpfh', '--fpfh_max_nn=200',
                *([] if voxel is None else [f'--voxel={voxel}', '--verify=0']))
     assert out.returncode == 0, out.stderr[-3000:]
     result = json.loads((tmp_path / f'{name}.json').read_text())

@@ -230,6 +230,13 @@ def test_farthest_point_keypoints_are_spread_and_deterministic():
   cover = lambda chosen: spatial.cKDTree(pts[chosen]).query(pts)[0].max()
   assert cover(idx) < 0.7 * cover(np.random.default_rng(1).choice(3000, 200, replace=False))
   assert len(keypoints.farthest_point_keypoints(pts[:5], 200)) == 5
+  # Past its budget it samples every 3rd point (a map tile's grid): on 10 times as many
+  # points, within 10 % of the covering radius of sampling them all.
+  dense = np.random.default_rng(0).uniform(-20, 20, (30000, 3))
+  strided = keypoints.farthest_point_keypoints(dense, 200, max_points=10000)
+  assert len(strided) == 200 and np.all(strided % 3 == 0)
+  cover = lambda chosen: spatial.cKDTree(dense[chosen]).query(dense)[0].max()
+  assert cover(strided) < 1.1 * cover(keypoints.farthest_point_keypoints(dense, 200))
 
 
 def _sparse_rings(seed=0, rings=6):

@@ -33,9 +33,22 @@ def random_keypoints(rng: np.random.Generator, num_points: int, k: int) -> np.nd
   return np.sort(rng.choice(num_points, min(k, num_points), replace=False))
 
 
-def farthest_point_keypoints(points: np.ndarray, k: int) -> np.ndarray:
+# Farthest-point sampling computes N distances per pick. Above this many points it samples
+# an even stride of them instead: picks metres apart lose nothing that a stride of a 0.2 m
+# grid drops, and a map tile's 1.5 M grid points cost what 200,000 do. Every cloud of the
+# project's test sets (<= 46,000 points) is sampled whole.
+FPS_MAX_POINTS = 200_000
+
+
+def farthest_point_keypoints(points: np.ndarray, k: int,
+                             max_points: int = FPS_MAX_POINTS) -> np.ndarray:
   """k points spread evenly over the cloud: farthest-point sampling of points [N, 3]
-  from the point nearest the centroid (deterministic) -> sorted indices [min(k, N)]."""
+  (of every ceil(N / max_points)-th one) from the point nearest the centroid
+  (deterministic) -> sorted indices [min(k, N)]."""
+  stride = -(-len(points) // max_points)
+  if stride > 1:
+    return np.arange(0, len(points), stride)[farthest_point_keypoints(points[::stride], k,
+                                                                      max_points)]
   pts = np.asarray(points, np.float64)
   k = min(k, len(pts))
   if k == 0:
@@ -91,8 +104,6 @@ def point_spacing(points: np.ndarray, sample: int = 2000) -> float:
   probe = pts[::max(1, len(pts) // sample)]
   dist, _ = spatial.cKDTree(pts).query(probe, k=2)
   return float(np.median(dist[:, 1]))
-
-
 
 
 def iss_with_fallbacks(points: np.ndarray) -> tuple[np.ndarray, str]:
