@@ -40,6 +40,7 @@ def _pair(yaw_deg: float, shift) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @pytest.mark.real_data
+@pytest.mark.slow
 def test_search_finds_a_pose_turned_and_shifted_anywhere_on_a_real_scan():
   cloud1, cloud2, t_true = _pair(137.0, [14.0, -9.0, 0.3])
   found = bev.search(cloud1, cloud2, k=3)
@@ -70,6 +71,7 @@ def test_search_is_unchanged_by_points_no_yaw_brings_into_the_image():
 
 
 @pytest.mark.real_data
+@pytest.mark.slow
 def test_search_and_verification_use_a_stride_of_a_cloud_past_their_budgets(monkeypatch):
   """A map tile's grid is imaged and aligned to on an even stride of its points
   (bev.MAX_POINTS, verification.TARGET_POINTS): with both a quarter of the scan, the BEV
@@ -87,6 +89,7 @@ def test_search_and_verification_use_a_stride_of_a_cloud_past_their_budgets(monk
 
 
 @pytest.mark.real_data
+@pytest.mark.slow
 def test_verification_with_bev_candidates_registers_where_every_ransac_pose_is_wrong():
   """RANSAC's candidates all 8 m off; the BEV search's poses join the check, and the
   verified pose is exact."""
