@@ -2,7 +2,7 @@ r"""Registration speed in the three regimes a user meets, against Open3D's own p
 
     python -m experiments.benchmark_registration --dataset=data_cache/real_pairs \
         [--num_pairs=100] [--cold_pairs=3] [--draws=4,1] \
-        [--methods=fpfh,learned,open3d_paper,open3d_tutorial]
+        [--methods=fpfh,learned,open3d_paper,open3d_tutorial] [--dense=2000000] [--tile=20000000]
 
 On the same pairs, for the project's ISS + FPFH, the project's ISS + learned (`ours`,
 one row per --draws setting) and a plain Open3D pipeline (`ssd_jax.registration.reference`:
