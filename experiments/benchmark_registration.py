@@ -217,6 +217,9 @@ def main(argv):
   bad = sorted(set(FLAGS.methods) - set(NAMES))
   if bad:
     raise SystemExit(f'error: --methods must be among {sorted(NAMES)}, got {bad}')
+  if FLAGS.dense < 0 or FLAGS.tile < 0:
+    raise SystemExit(f'error: --dense and --tile must be >= 0 points (0: none), got '
+                     f'{FLAGS.dense} and {FLAGS.tile}')
   shipped = pretrained.load('ours')
   draws = [int(d) for d in FLAGS.draws if d.isdigit() and int(d) > 0] or [shipped.draws]
   if len(draws) != max(len(FLAGS.draws), 1):

@@ -48,3 +48,12 @@ def test_registration_benchmark_prints_every_regime_with_the_dense_one(synthetic
   assert '50,000-point tile per cloud' in tile and tile.endswith('| 100 % |'), tile
   peak = float(dense.split('peak ')[1].split(' GiB')[0])
   assert 0.1 < peak < 2.0
+
+
+@pytest.mark.multiprocess
+def test_registration_benchmark_refuses_a_negative_size_in_one_line(synthetic_root):
+  out = subprocess.run([sys.executable, '-m', 'experiments.benchmark_registration',
+                        f'--dataset={synthetic_root / "test_kitti"}', '--tile=-5'],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300)
+  assert out.returncode != 0 and out.stderr.strip() == (
+      'error: --dense and --tile must be >= 0 points (0: none), got 0 and -5')

@@ -8,6 +8,12 @@ from __future__ import annotations
 import numpy as np
 
 
+def even_stride(n: int, count: int) -> int:
+  """The step of an even stride over n items that keeps at most `count` of them (1: all),
+  the work budget of the stages that would otherwise grow with a map tile's size."""
+  return max(1, -(-n // count))
+
+
 def _o3d_cloud(points: np.ndarray):
   import open3d as o3d  # pylint: disable=g-import-not-at-top
   return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))

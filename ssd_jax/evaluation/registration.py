@@ -129,8 +129,8 @@ def success_by_yaw(pairs: Sequence, results: Sequence[dict]) -> list[tuple[int, 
   """Per bin of YAW_BINS: (pairs in the bin, success in percent; NaN for an empty bin)."""
   bins = _yaw_bins(pairs)
   ok = np.array([r['success'] for r in results], bool)
-  return [(int(ok[bins == b].size), 100 * float(ok[bins == b].mean()) if (bins == b).any()
-           else float('nan')) for b in range(len(YAW_BINS))]
+  masks = [bins == b for b in range(len(YAW_BINS))]
+  return [(int(m.sum()), 100 * float(ok[m].mean()) if m.any() else float('nan')) for m in masks]
 
 
 def yaw_table(pairs: Sequence, results: Mapping[str, list[dict]], rows: Sequence[str]):

@@ -26,6 +26,7 @@ import dataclasses
 import numpy as np
 from scipy import fft, ndimage
 
+from ssd_jax.data import preprocess
 from ssd_jax.registration import ransac
 
 # Metres per image cell: the verification's ICP (1 m correspondences) converges from
@@ -109,7 +110,7 @@ def _within_reach(points: np.ndarray, centre: np.ndarray, extent: float) -> np.n
   # image is made from the points inside it alone, so dropping the rest changes nothing.
   local = points - centre
   local = local[(local[:, :2] ** 2).sum(1) < 2 * extent ** 2]
-  return local[::max(1, -(-len(local) // MAX_POINTS))]
+  return local[::preprocess.even_stride(len(local), MAX_POINTS)]
 
 
 def _peaks(correlation: np.ndarray, count: int, radius: int) -> list[tuple[float, int, int]]:

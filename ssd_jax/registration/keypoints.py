@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import spatial
 
+from ssd_jax.data import preprocess
+
 # docs/method.md §4: the parameters of the paper's ISS keypoints.
 ISS_PARAMS = dict(salient_radius=1.0, non_max_radius=0.5, gamma_21=0.975, gamma_32=0.975,
                   min_neighbors=7)
@@ -45,7 +47,7 @@ def farthest_point_keypoints(points: np.ndarray, k: int,
   """k points spread evenly over the cloud: farthest-point sampling of points [N, 3]
   (of every ceil(N / max_points)-th one) from the point nearest the centroid
   (deterministic) -> sorted indices [min(k, N)]."""
-  stride = -(-len(points) // max_points)
+  stride = preprocess.even_stride(len(points), max_points)
   if stride > 1:
     return np.arange(0, len(points), stride)[farthest_point_keypoints(points[::stride], k,
                                                                       max_points)]

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ssd_jax.data import preprocess
 from ssd_jax.registration import bev
 
 # Metres: a cloud-2 point this close to cloud 1 after a candidate's ICP counts as fitting
@@ -84,7 +85,7 @@ def verify(points1: np.ndarray, points2: np.ndarray, candidates: np.ndarray,
     raise ValueError(f"score_on must be 'rising' or 'all', got {score_on!r}")
   points2 = np.asarray(points2)
   points1 = np.asarray(points1)
-  target, source = open3d_clouds(points1[::max(1, -(-len(points1) // TARGET_POINTS))],
+  target, source = open3d_clouds(points1[::preprocess.even_stride(len(points1), TARGET_POINTS)],
                                  _even(points2, SOURCE_POINTS))
   refined = np.stack([point_to_plane_icp(target, source, t)[0] for t in candidates])
   scored = source
