@@ -10,6 +10,9 @@ pairs (r_th = 0.1 ... 0.4 m, with the surviving positive / negative counts) as
 descriptor_matching.md / .csv, the ROC curves as descriptor_matching_roc.png and the
 per-pair distances as descriptor_matching_distances.npz.
 The paper: ours 66.33 % on all 30,000 Oxford pairs, 3DFeat-Net 36.84 %.
+
+Expected (2-core CPU VM, ~4 min; the shipped models, all 2,000 pairs): FPFH 45.0 %,
+3DFeat-Net (`feat3dnet`) 56.9 %, ours 68.5 %.
 """
 
 import ml_collections
