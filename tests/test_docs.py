@@ -1,5 +1,6 @@
 """The user guide and the reference pages: their links resolve and CI runs the README's tests."""
 
+import functools
 import pathlib
 import re
 import unicodedata
@@ -19,7 +20,8 @@ def slug(heading: str) -> str:
   return kept.replace(' ', '-')
 
 
-def anchors(page: pathlib.Path) -> set[str]:
+@functools.cache   # a page is read once, however many links point into it
+def anchors(page: pathlib.Path) -> frozenset[str]:
   in_code = False
   found = set()
   for line in page.read_text().splitlines():
@@ -27,7 +29,7 @@ def anchors(page: pathlib.Path) -> set[str]:
       in_code = not in_code
     elif not in_code and line.startswith('#'):
       found.add(slug(line.lstrip('#')))
-  return found
+  return frozenset(found)
 
 
 def test_slug_follows_github():
