@@ -26,7 +26,8 @@ With --groundtruth (a `groundtruths.txt` listing the pair by the clouds' file
 stems, e.g. 000000.bin / 000001.bin), the errors against it are printed too.
 
 In batch mode each cloud's features are computed once; DIR receives registrations.csv
-(one row per pair: T_12, inliers, RANSAC trials, seconds, errors with --groundtruth),
+(one row per pair: T_12, inliers, RANSAC trials, seconds, errors with --groundtruth, and
+the seconds of each stage),
 written as the pairs complete, and for --sequence poses.txt (each scan's pose in the
 first scan's frame, KITTI's 12 numbers per line) and trajectory.png. PAIRS.txt holds
 "cloud1 cloud2" per line, paths relative to its folder.
@@ -34,7 +35,6 @@ first scan's frame, KITTI's 12 numbers per line) and trajectory.png. PAIRS.txt h
 
 import csv
 import dataclasses
-import functools
 import json
 import os
 import sys
@@ -48,7 +48,7 @@ from tqdm import auto as tqdm
 from ssd_jax import cli, geometry, pretrained, viz
 from ssd_jax.data import clean, groundtruth, io
 from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.registration import metrics, pipeline
+from ssd_jax.registration import batch, metrics, pipeline
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('cloud1', None, 'Target cloud (its frame is the output frame).')
@@ -70,16 +70,17 @@ flags.DEFINE_integer('bev', 5, "With upright RANSAC and --verify: also check the
                      'view search\'s this many best poses (every yaw and shift of the two '
                      'top-down maps of what rises above the ground); 0: RANSAC\'s only.')
 # Learned by default: with these defaults it registers as many pairs as FPFH or more on
-# every set of the README's table but one (a pair fewer of 120), and on a dense grid it
-# takes a third of FPFH's time (4 m / 1,000-neighbour histograms; docs/benchmarks.md).
+# every set of the README's table, and on a dense grid it takes a third of FPFH's time
+# (4 m / 1,000-neighbour histograms; docs/benchmarks.md).
 flags.DEFINE_list('descriptor', ['learned'], 'Descriptor(s): learned, fpfh; a list runs each.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model name, export folder or training workdir '
                     'for learned (default: the shipped ours / ours_detector).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding this pair (optional).')
-flags.DEFINE_bool('icp', False, 'Refine with point-to-plane ICP (Open3D) after RANSAC.')
+flags.DEFINE_bool('icp', False, 'Refine with point-to-plane ICP (1 m, then 0.5 m) after RANSAC.')
 flags.DEFINE_integer('seed', 0, 'RANSAC / random-keypoint seed.')
-flags.DEFINE_integer('draws', 0, 'Learned descriptors: average this many random samplings '
-                     "of each ball (0: the model's own setting; fewer is faster, noisier).")
+flags.DEFINE_integer('draws', None, 'Learned descriptors: average this many random samplings '
+                     "of each ball (0: the model's own setting; default 1 where the poses are "
+                     "verified (--verify > 0), else the model's).")
 flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m FPFH search (normals: '
                      '1 m, 30 neighbours).')
 flags.DEFINE_float('voxel', None, "Put each cloud on this grid (metres) first; default the "
@@ -136,11 +137,16 @@ def _voxel(model) -> float:
   return pipeline.voxel_size_of(model) if FLAGS.voxel is None else FLAGS.voxel
 
 
+def _read(path: str) -> np.ndarray:
+  """The cloud at `path`, float64 in the caller's coordinates, NaN rows dropped."""
+  return clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
+
+
 def _read_on_grid(path: str, voxel: float, say, seconds: dict | None = None) -> np.ndarray:
   """The cloud at `path` (float64, the caller's coordinates) on the `voxel` m grid;
   `say(line)` gets the one line of what was done, `seconds` the time of each step."""
   t0 = time.perf_counter()
-  cloud = clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
+  cloud = _read(path)
   t1 = time.perf_counter()
   cloud, note = pipeline.to_grid(cloud, voxel)
   if seconds is not None:
@@ -181,58 +187,31 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
     pairs = _read_pairs(FLAGS.pairs)
   os.makedirs(FLAGS.out, exist_ok=True)
   gt_pairs = groundtruth.read_groundtruths(FLAGS.groundtruth) if FLAGS.groundtruth else None
-  features, errors = {}, []
-
-  voxel = _voxel(model)
+  errors = []
   say = tqdm.tqdm.write if _show_progress() else print
-
-  @functools.lru_cache(maxsize=4)   # the clouds of the pair at hand, for verification
-  def read(path):
-    return _read_on_grid(path, voxel, say)
-
-  def features_of(path):   # each cloud once (a few kB): scan i serves pairs i-1 and i
-    if path not in features:
-      features[path] = pipeline.features_anywhere(read(path), FLAGS.keypoints, descriptor,
-                                                  model, FLAGS.seed, FLAGS.fpfh_max_nn, voxel=0)
-      if features[path].note:
-        say(f'{os.path.basename(path)}: {features[path].note}')
-    return features[path]
-
-  def fallback_features(path):
-    return pipeline.features_anywhere(read(path), 'auto', descriptor, model, FLAGS.seed,
-                                      FLAGS.fpfh_max_nn, voxel=0)
+  registrar = batch.Registrar(_read, keypoints=FLAGS.keypoints,
+                              descriptor=descriptor, model=model, seed=FLAGS.seed,
+                              fpfh_max_nn=FLAGS.fpfh_max_nn, voxel=_voxel(model),
+                              estimator=FLAGS.ransac, verify=FLAGS.verify,
+                              bev=_bev_candidates(), say=say)
 
   transforms = []
   with open(os.path.join(FLAGS.out, 'registrations.csv'), 'w', newline='') as f:
     writer = csv.writer(f)
     writer.writerow(['cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials',
                      'seconds', *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)],
-                     'rte', 'rre', 'success', 'error'])
+                     'rte', 'rre', 'success', 'error', *[f'seconds_{s}' for s in batch.STAGES]])
     for cloud1, cloud2 in tqdm.tqdm(pairs, desc='registration', unit='pair',
                                     disable=not _show_progress()):
       start = time.perf_counter()
       try:
-        f1, f2 = features_of(cloud1), features_of(cloud2)
-        k = max(FLAGS.verify, 1)
-        try:
-          reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac, candidates=k)
-        except ValueError as e:
-          if FLAGS.keypoints != 'iss':
-            raise
-          # As pipeline.register: keypoints spread over both clouds, this pair only.
-          f1, f2 = (fallback_features(c) for c in (cloud1, cloud2))
-          say(f'{os.path.basename(cloud1)} / {os.path.basename(cloud2)}: {e}; '
-              'registered again with farthest-point keypoints')
-          reg = pipeline.estimate(f1, f2, FLAGS.seed, estimator=FLAGS.ransac, candidates=k)
-        if FLAGS.verify > 0:
-          reg = pipeline.verify(reg, f1, f2, read(cloud1), read(cloud2),
-                                bev_candidates=_bev_candidates())
+        reg, f1, f2 = registrar.register(cloud1, cloud2)
         t, inliers, trials, error = reg.transform, int(reg.inliers.sum()), reg.trials, ''
-        keypoints = (len(f1.xyz), len(f2.xyz))
+        keypoints, stages = (len(f1.xyz), len(f2.xyz)), reg.seconds
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a bad file ends the run, named
       except ValueError as e:   # too few keypoints, a flat cloud: a failed pair, not a failed run
-        t, inliers, trials, error, keypoints = np.eye(4), 0, 0, str(e), (0, 0)
+        t, inliers, trials, error, keypoints, stages = np.eye(4), 0, 0, str(e), (0, 0), {}
       transforms.append(t)
       errors.append(bool(error))
       t_gt = (_ground_truth(FLAGS.groundtruth, cloud1, cloud2, False, gt_pairs)
@@ -240,7 +219,8 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
       gt = metrics.registration_errors(t_gt, t) if t_gt is not None else {}
       writer.writerow([cloud1, cloud2, *keypoints, inliers, trials,
                        f'{time.perf_counter() - start:.3f}', *t.ravel().tolist(),
-                       gt.get('rte', ''), gt.get('rre', ''), gt.get('success', ''), error])
+                       gt.get('rte', ''), gt.get('rre', ''), gt.get('success', ''), error,
+                       *[f'{stages[s]:.4f}' if s in stages else '' for s in batch.STAGES]])
       f.flush()   # a stopped run keeps the pairs it registered
   print(f'wrote {os.path.join(FLAGS.out, "registrations.csv")}: {len(pairs)} pairs, '
         f'{descriptor} descriptors ({checkpoint if descriptor == "learned" else "Open3D"}), '
@@ -257,10 +237,13 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
 
 
 def _load_model(checkpoint: str):
-  """The model named by --checkpoint, describing with --draws samplings when set."""
-  if FLAGS.draws < 0:
+  """The model named by --checkpoint, describing with --draws samplings (by default
+  `pipeline.VERIFIED_DRAWS` where the poses are verified, else the model's own)."""
+  if FLAGS.draws is not None and FLAGS.draws < 0:
     raise ValueError(f'--draws must be >= 0, got {FLAGS.draws}')
   model = pretrained.load(checkpoint)
+  if FLAGS.draws is None:
+    return pipeline.verified_model(model) if FLAGS.verify > 0 else model
   return dataclasses.replace(model, draws=FLAGS.draws) if FLAGS.draws else model
 
 

@@ -188,10 +188,16 @@ def _neighbourhoods(model: Model, points: np.ndarray, centers: np.ndarray, searc
   if search == 'kdtree':
     # cKDTree tests d <= r; ball_query tests d^2 < r^2. Shrinking r by one ulp makes
     # the boundary case agree.
-    balls = [np.asarray(b, np.int64) for b in spatial.cKDTree(points).query_ball_point(
-        centers, np.nextafter(model.radius, 0))]
-    idx, has = zip(*(_first_in_order(balls, _permutation(len(points), s), model.num_samples)
-                     for s in order_seeds))
+    radius = np.nextafter(model.radius, 0)
+    if len(order_seeds) == 1:
+      idx, has = zip(_first_in_prefix(points, centers, radius,
+                                      _permutation(len(points), order_seeds[0]),
+                                      model.num_samples))
+    else:   # the balls once, every draw's members from them
+      balls = [np.asarray(b, np.int64)
+               for b in spatial.cKDTree(points).query_ball_point(centers, radius)]
+      idx, has = zip(*(_first_in_order(balls, _permutation(len(points), s), model.num_samples)
+                       for s in order_seeds))
   else:
     idx, has = zip(*(_dense_first_in_order(model, points, centers, s) for s in order_seeds))
   return np.concatenate(idx), np.concatenate(has)
@@ -234,6 +240,37 @@ def _first_in_order(balls: list[np.ndarray], perm: np.ndarray,
     idx[k, :len(r)] = perm[r]
     idx[k, len(r):] = perm[r[0]]
     has[k] = True
+  return idx, has
+
+
+# One draw: a ball's c members that come first in the draw's order are its c members of
+# lowest rank, so a ball that holds c points of the first PREFIX share of the shuffled
+# cloud has them there. A KD-tree of that prefix returns a quarter of the neighbours; the
+# balls that hold fewer are queried on the whole cloud. The same clusters (tested).
+PREFIX = 0.25
+
+
+def _first_in_prefix(points: np.ndarray, centers: np.ndarray, radius: float,
+                     perm: np.ndarray, num_samples: int) -> tuple[np.ndarray, np.ndarray]:
+  """`_first_in_order` of the balls of `radius` at centers [K, 3] in points [N, 3] under
+  the order perm [N], from the prefix of the shuffled cloud where it suffices."""
+  prefix = max(int(len(points) * PREFIX), min(len(points), num_samples))
+  # The prefix tree's indices are ranks in the draw's order; sorted, the first c come first.
+  balls = spatial.cKDTree(points[perm[:prefix]]).query_ball_point(centers, radius,
+                                                                  return_sorted=True)
+  idx = np.zeros((len(centers), num_samples), np.int64)
+  has = np.zeros(len(centers), bool)
+  short = []
+  for k, ball in enumerate(balls):
+    if len(ball) >= num_samples:
+      idx[k] = perm[ball[:num_samples]]
+      has[k] = True
+    else:
+      short.append(k)
+  if short:
+    full = [np.asarray(b, np.int64)
+            for b in spatial.cKDTree(points).query_ball_point(centers[short], radius)]
+    idx[short], has[short] = _first_in_order(full, perm, num_samples)
   return idx, has
 
 

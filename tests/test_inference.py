@@ -10,6 +10,8 @@ from scipy import spatial
 
 from ssd_jax import grouping, inference, network, train
 from ssd_jax.configs import cpu_small
+from ssd_jax.data import io
+from tests.conftest import shared_path
 
 
 @pytest.fixture(scope='module')
@@ -193,3 +195,21 @@ def test_restored_weights_must_fit_the_configured_network():
   config.model.descriptor_dim = 64
   with pytest.raises(ValueError, match='run/7: not the weights of the network'):
     inference.check_variables(variables, config.model, 'run/7')
+
+
+@pytest.mark.real_data
+def test_one_draw_finds_the_clusters_of_every_ball_from_the_shuffled_clouds_prefix():
+  """`_first_in_prefix` (one draw) gives `_first_in_order`'s clusters exactly, on a real
+  scan (most balls served by the prefix) and on a sparse crop of it (every ball falls
+  back to the whole cloud)."""
+  scan = io.read_cloud(shared_path('example', 'kitti_00_001554.bin'))[:, :3].astype(np.float32)
+  radius = np.nextafter(4.0, 0)
+  for points in (scan, scan[::40]):
+    centers = points[np.random.default_rng(0).choice(len(points), 300, replace=False)]
+    perm = inference._permutation(len(points), 0)
+    balls = [np.asarray(b, np.int64)
+             for b in spatial.cKDTree(points).query_ball_point(centers, radius)]
+    expected = inference._first_in_order(balls, perm, 64)
+    found = inference._first_in_prefix(points, centers, radius, perm, 64)
+    np.testing.assert_array_equal(found[0], expected[0])
+    np.testing.assert_array_equal(found[1], expected[1])

@@ -28,6 +28,19 @@ def voxel_downsample(points: np.ndarray, voxel_size: float, dtype=np.float32) ->
   return np.asarray(down.points, dtype)
 
 
+def occupied_voxels(points: np.ndarray, voxel_size: float) -> int:
+  """How many points [N, 3] `voxel_downsample` returns (its voxels: Open3D's, from the
+  cloud's lower bound less half a voxel), counted in numpy without Open3D."""
+  points = np.asarray(points, np.float64)
+  if not len(points):
+    return 0
+  cell = np.floor((points - (points.min(0) - voxel_size / 2)) / voxel_size).astype(np.int64)
+  cell -= cell.min(0)
+  span = cell.max(0) + 1
+  key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
+  return int(len(np.unique(key)))
+
+
 def process_scan(points: np.ndarray, voxel_size: float = 0.2,
                  normal_radius: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
   """3DFeat-Net's test-set processing: voxel grid, then normals facing the sensor at

@@ -37,14 +37,17 @@ def label(row: str) -> str:
   return CLOUD_ROWS.get(row) or feature_store.row_label(row)
 
 
-def _register_clouds(row: str, points1: np.ndarray, points2: np.ndarray, seed: int
+def _register_clouds(row: str, store: feature_store.FeatureStore, pair, seed: int
                      ) -> tuple[np.ndarray, dict]:
   """One of `CLOUD_ROWS` on one pair -> (T_12 [4, 4], {'inliers', 'matches'})."""
   if row == REFERENCE_ROW:
-    t, _, stats = reference.open3d_register(points1, points2, seed, 'paper')
+    t, _, stats = reference.open3d_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2),
+                                            seed, 'paper')
     return t, stats
-  candidates = bev.search(points1, points2, feature_store.BEV_CANDIDATES).transforms
-  best, refined, _ = verification.verify(points1, points2, candidates)
+  cloud1, cloud2 = store.prepared(pair.cloud1), store.prepared(pair.cloud2)
+  candidates = bev.search(cloud1.footprint, cloud2.footprint,
+                          feature_store.BEV_CANDIDATES).transforms
+  best, refined, _ = verification.verify(cloud1.target, cloud2.source, candidates)
   return refined[best], {'inliers': 0, 'matches': 0}
 
 
@@ -62,8 +65,7 @@ def register_clouds(pairs: Sequence, store: feature_store.FeatureStore,
   def register(n: int, pair) -> dict:
     res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
     try:
-      t, stats = _register_clouds(row, store.cloud(pair.cloud1), store.cloud(pair.cloud2),
-                                  seed * 1_000_003 + n)
+      t, stats = _register_clouds(row, store, pair, seed * 1_000_003 + n)
     except ValueError as e:
       res.update(trials=0, inliers=0, matches=0, rte=float('inf'), rre=float('inf'),
                  rre_geodesic=float('inf'), success=False, error=str(e))

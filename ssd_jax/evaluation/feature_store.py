@@ -20,7 +20,8 @@ import numpy as np
 from ssd_jax import errors, pretrained
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
-from ssd_jax.registration import features as features_lib, pipeline
+from ssd_jax.registration import batch, features as features_lib, pipeline
+from ssd_jax.registration import prepared as prepared_lib
 
 BUILTIN_KEYPOINTS = ('iss', 'random', 'auto')
 BUILTIN_DESCRIPTORS = ('fpfh',)
@@ -148,6 +149,7 @@ class FeatureStore:
     self.fpfh_max_nn = fpfh_max_nn
     self.seconds = collections.defaultdict(float)
     self._clouds, self._keypoints, self._descriptors = {}, {}, {}
+    self._prepared = collections.OrderedDict()
 
   def cloud(self, path: str | os.PathLike) -> np.ndarray:
     """xyz [N, 3] metres, NaN rows dropped."""
@@ -155,6 +157,18 @@ class FeatureStore:
     if key not in self._clouds:
       self._clouds[key] = clean.clean_cloud(io.read_cloud(path), key)
     return self._clouds[key]
+
+  def prepared(self, path: str | os.PathLike) -> prepared_lib.PreparedCloud:
+    """`cloud(path)` as the BEV search and the verification use it, kept for the last
+    `batch.CACHE_SIZE` clouds (a set pairs each cloud 1 with several re-scans)."""
+    key = str(path)
+    if key in self._prepared:
+      self._prepared.move_to_end(key)
+    else:
+      self._prepared[key] = prepared_lib.PreparedCloud(self.cloud(path))
+      if len(self._prepared) > batch.CACHE_SIZE:
+        self._prepared.popitem(last=False)
+    return self._prepared[key]
 
   def keypoints(self, path: str | os.PathLike, source: str) -> np.ndarray:
     """Keypoint indices [K] into `cloud(path)`."""
@@ -172,17 +186,23 @@ class FeatureStore:
     return self._keypoints[key]
 
   def features(self, path: str | os.PathLike, row: str) -> pipeline.CloudFeatures:
-    """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud."""
+    """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud. A learned descriptor
+    of a row that verifies its poses describes as the register command's defaults do
+    (`pipeline.VERIFIED_DRAWS` samplings of each ball)."""
     kp, desc = split_row(row)
-    key = (str(path), kp, desc)
+    verified = row_verifies(row) and desc not in BUILTIN_DESCRIPTORS
+    name = f'{desc}@draws={pipeline.VERIFIED_DRAWS}' if verified else desc
+    key = (str(path), kp, name)
     if key not in self._descriptors:
       points, idx = self.cloud(path), self.keypoints(path, kp)
       t0 = time.perf_counter()
       if desc in BUILTIN_DESCRIPTORS:
         d = pipeline.compute_descriptors(points, idx, desc, fpfh_max_nn=self.fpfh_max_nn)
       else:
-        d = pipeline.compute_descriptors(points, idx, 'learned', self._model(desc))
-      self.seconds[f'descriptors:{desc}'] += time.perf_counter() - t0
+        model = self._model(desc)
+        d = pipeline.compute_descriptors(points, idx, 'learned',
+                                         pipeline.verified_model(model) if verified else model)
+      self.seconds[f'descriptors:{name}'] += time.perf_counter() - t0
       self._descriptors[key] = d
     return pipeline.CloudFeatures(self.cloud(path)[self.keypoints(path, kp)],
                                   self._descriptors[key], {})

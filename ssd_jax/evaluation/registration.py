@@ -56,7 +56,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
                                 estimator=feature_store.row_estimator(row),
                                 candidates=feature_store.VERIFY_CANDIDATES if verify else 1)
         if verify:
-          reg = pipeline.verify(reg, f1, f2, store.cloud(pair.cloud1), store.cloud(pair.cloud2),
+          reg = pipeline.verify(reg, f1, f2, store.prepared(pair.cloud1), store.prepared(pair.cloud2),
                                 inlier_threshold, feature_store.row_bev_candidates(row))
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named

@@ -300,19 +300,21 @@ def distinct_best(transforms: np.ndarray, scores: np.ndarray, k: int,
   """Indices of up to k hypotheses [T, 4, 4], best score [T] first (earliest on ties),
   each at least `separation` (metres of translation or degrees of rotation) from every
   one chosen before it: the runners-up a repetitive scene leaves, not copies of the best."""
+  transforms = np.asarray(transforms, np.float64)
+  # Rotation angle between R_i and R_j from trace(R_i R_j^T) = sum(R_i * R_j).
+  cos_min = np.cos(np.deg2rad(separation[1]))
   chosen = []
   for i in np.argsort(-np.asarray(scores), kind='stable'):
     if len(chosen) == k:
       break
-    if all(np.linalg.norm(transforms[i][:3, 3] - transforms[j][:3, 3]) >= separation[0]
-           or _angle_deg(transforms[i][:3, :3] @ transforms[j][:3, :3].T) >= separation[1]
-           for j in chosen):
-      chosen.append(int(i))
+    if chosen:
+      others = transforms[chosen]
+      near = np.linalg.norm(others[:, :3, 3] - transforms[i, :3, 3], axis=1) < separation[0]
+      cos = (np.sum(others[:, :3, :3] * transforms[i, :3, :3], axis=(1, 2)) - 1.0) / 2.0
+      if np.any(near & (np.clip(cos, -1.0, 1.0) > cos_min)):
+        continue
+    chosen.append(int(i))
   return chosen
-
-
-def _angle_deg(r: np.ndarray) -> float:
-  return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def ransac_upright(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
@@ -333,13 +335,23 @@ def ransac_upright(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
   if candidates > 1:
     min_trials = max(min_trials, min(CANDIDATE_MIN_TRIALS, max_trials))
 
+  x2, y2, z2 = (np.ascontiguousarray(xyz2[:, k]) for k in range(3))
+  dz0 = z2 - xyz1[:, 2]
+
   def score(batch):
+    # A turn about z: x and y of each residual from the yaw's cosine and sine, z a shift
+    # ([B, C] planes, not [B, C, 3] products with a 3 x 3 that is mostly 0 and 1).
     t = upright_fit(xyz2[batch], xyz1[batch])
-    d = xyz2 @ np.swapaxes(t[:, :3, :3], -1, -2)
-    d += t[:, None, :3, 3]
-    d -= xyz1
-    d *= d
-    return np.sum(d.sum(-1) < thr2, axis=1)
+    c, s = t[:, 0, 0, None], t[:, 1, 0, None]
+    dx = c * x2 - s * y2 + (t[:, 0, 3, None] - xyz1[:, 0])
+    dy = s * x2 + c * y2 + (t[:, 1, 3, None] - xyz1[:, 1])
+    dz = dz0 + t[:, 2, 3, None]
+    dx *= dx
+    dy *= dy
+    dz *= dz
+    dx += dy
+    dx += dz
+    return np.sum(dx < thr2, axis=1)
 
   n = len(xyz1)
   best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)

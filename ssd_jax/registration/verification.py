@@ -5,18 +5,20 @@ RANSAC ranks a pose by how many putative correspondences it explains. Where the 
 are few and the scene repeats (a straight street of like objects, two scans tens of
 metres apart), a wrong pose can explain as many as the right one, and the right one is
 often among the runners-up (`ransac.distinct_best`). Candidates may also come from the
-whole scene (`bev.search`). Each is refined by point-to-plane ICP and scored by the share
-of cloud 2's structure (what rises from the ground) it lays within `FIT_DISTANCE` of cloud
-1: the dense geometry, not the sparse matches, picks the pose. The same check that the
-verification step of a classic registration pipeline makes.
+whole scene (`bev.search`). Each that could win is refined by point-to-plane ICP (`icp`),
+coarse to fine, and scored by the share of cloud 2's structure (what rises from the
+ground) it lays within `FIT_DISTANCE` of cloud 1: the dense geometry, not the sparse
+matches, picks the pose: the check of a classic registration pipeline's verification step.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ssd_jax.data import preprocess
-from ssd_jax.registration import bev
+from ssd_jax.registration import bev, icp, ransac
 
 # Metres: a cloud-2 point this close to cloud 1 after a candidate's ICP counts as fitting
 # (1.5 voxels of the 0.2 m grid: the two grids' offset and the sensors' noise).
@@ -36,63 +38,128 @@ MIN_RISING_POINTS = 200
 # ICP of each candidate: correspondences within these distances (metres), in turn.
 ICP_DISTANCES = (1.0, 0.5)
 ICP_ITERATIONS = 30
+# Coarse to fine: every candidate that could win is first aligned by COARSE_ITERATIONS
+# steps of ICP at ICP_DISTANCES[0] with COARSE_POINTS of cloud 2's points; the
+# FINE_CANDIDATES best of those (distinct poses, within FINE_MARGIN of the best's
+# fitness) are then refined as above, from there.
+COARSE_POINTS = 1000
+COARSE_ITERATIONS = 10
+FINE_CANDIDATES = 2
+FINE_MARGIN = 0.1
+# Metres: before any ICP, each candidate is scored by the share of cloud 2's scored points
+# within this distance of cloud 1. One whose share at this distance does not exceed the
+# best coarse-aligned candidate's share at FIT_DISTANCE is not aligned: ICP with 1 m
+# correspondences moves a pose by less than this margin beyond its first distance, so it
+# could not overtake (docs/registration.md: the register defaults' candidates).
+PRESCORE_DISTANCE = 1.5
+# A candidate whose start lies this close (metres, degrees) to a pose the coarse ICP has
+# already started from or converged to shares that result: RANSAC's and the BEV search's
+# poses of the right answer are often a cell or a yaw step apart.
+SAME_START = (0.5, 1.0)
 
 
-def _open3d_cloud(points: np.ndarray):
-  import open3d as o3d  # pylint: disable=g-import-not-at-top  (as every Open3D user here)
-  return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
+@dataclasses.dataclass(frozen=True)
+class Source:
+  """Cloud 2 as verification moves it, made once per cloud: SOURCE_POINTS and
+  COARSE_POINTS of its points for ICP, and the points a candidate is scored on."""
+  points: np.ndarray       # [<= SOURCE_POINTS, 3] metres
+  coarse: np.ndarray       # [<= COARSE_POINTS, 3]
+  scored: np.ndarray       # [S, 3]
 
 
-def open3d_clouds(target: np.ndarray, source: np.ndarray):
-  """Open3D clouds for point-to-plane ICP: target [N1, 3] with normals within 1 m /
-  30 neighbours, source [N2, 3] (metres, float64)."""
-  import open3d as o3d  # pylint: disable=g-import-not-at-top
-  target = _open3d_cloud(target)
-  target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=1.0, max_nn=30))
-  return target, _open3d_cloud(source)
+def target(points: np.ndarray) -> icp.Surface:
+  """points [N, 3] metres -> cloud 1 as verification aligns to it (`icp.surface`), over
+  at most TARGET_POINTS of its points (an even stride)."""
+  points = np.asarray(points, np.float64)
+  return icp.surface(points[::preprocess.even_stride(len(points), TARGET_POINTS)])
 
 
-def point_to_plane_icp(target, source, transform: np.ndarray, distances=ICP_DISTANCES,
-                       iterations: int = ICP_ITERATIONS) -> tuple[np.ndarray, float]:
-  """Open3D point-to-plane ICP of `open3d_clouds` from T_12 [4, 4], with correspondences
-  within each of `distances` (metres) in turn -> (T_12, share of source points with a
-  partner at the last distance)."""
-  import open3d as o3d  # pylint: disable=g-import-not-at-top
-  reg = o3d.pipelines.registration
-  t = np.asarray(transform, np.float64)
-  for dist in distances:
-    result = reg.registration_icp(source, target, dist, t,
-                                  reg.TransformationEstimationPointToPlane(),
-                                  reg.ICPConvergenceCriteria(max_iteration=iterations))
-    t = np.asarray(result.transformation)
-  return t, float(result.fitness)
+def source(points: np.ndarray, score_on: str = SCORE_ON) -> Source:
+  """points [N, 3] metres, z up -> the `Source` of cloud 2, scored on what rises from
+  its ground ('rising'; all of its points where fewer than MIN_RISING_POINTS rise) or on
+  all of its points ('all')."""
+  if score_on not in ('rising', 'all'):
+    raise ValueError(f"score_on must be 'rising' or 'all', got {score_on!r}")
+  points = np.asarray(points, np.float64)
+  icp_points = _even(points, SOURCE_POINTS)
+  scored = icp_points
+  if score_on == 'rising':
+    rising = points[bev.rising_from_ground(points)]
+    if len(rising) >= MIN_RISING_POINTS:
+      scored = _even(rising, SOURCE_POINTS)
+  coarse = points[::preprocess.even_stride(len(points), COARSE_POINTS)]
+  return Source(icp_points, np.ascontiguousarray(coarse), np.ascontiguousarray(scored))
 
 
 def _even(points: np.ndarray, count: int) -> np.ndarray:
-  return points[::max(1, len(points) // count)]
+  return np.ascontiguousarray(points[::max(1, len(points) // count)])
 
 
-def verify(points1: np.ndarray, points2: np.ndarray, candidates: np.ndarray,
+def fitness(target: icp.Surface, points: np.ndarray, transform: np.ndarray,
+            distance: float = FIT_DISTANCE) -> float:
+  """Share of points [S, 3] within `distance` metres of the target after T_12 (Open3D's
+  `evaluate_registration` fitness)."""
+  if not len(points):
+    return 0.0
+  found, _, _ = icp.correspondences(target, points @ transform[:3, :3].T + transform[:3, 3],
+                                    distance)
+  return float(found.mean())
+
+
+def _close(a: np.ndarray, b: np.ndarray, limits: tuple[float, float]) -> bool:
+  cos = (np.trace(a[:3, :3] @ b[:3, :3].T) - 1.0) / 2.0
+  return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < limits[0]
+              and cos > np.cos(np.deg2rad(limits[1])))
+
+
+def verify(points1, points2, candidates: np.ndarray,
            score_on: str = SCORE_ON) -> tuple[int, np.ndarray, np.ndarray]:
-  """Candidate poses T_12 [k, 4, 4] of cloud 2 [N2, 3] in cloud 1 [N1, 3] (metres, near
-  the origin, z up) -> (index of the best, each candidate refined by ICP [k, 4, 4], their
-  fitness [k]: the share of cloud 2's points that rise from the ground (`score_on`
-  'rising'; 'all': of all its points) within FIT_DISTANCE of cloud 1). Ties keep the
-  earlier candidate (RANSAC's order). Open3D's ICP sums over its threads, so the poses
-  repeat to rounding, not bit for bit."""
-  import open3d as o3d  # pylint: disable=g-import-not-at-top
-  if score_on not in ('rising', 'all'):
-    raise ValueError(f"score_on must be 'rising' or 'all', got {score_on!r}")
-  points2 = np.asarray(points2)
-  points1 = np.asarray(points1)
-  target, source = open3d_clouds(points1[::preprocess.even_stride(len(points1), TARGET_POINTS)],
-                                 _even(points2, SOURCE_POINTS))
-  refined = np.stack([point_to_plane_icp(target, source, t)[0] for t in candidates])
-  scored = source
-  if score_on == 'rising':
-    rising = points2[bev.rising_from_ground(points2)]
-    if len(rising) >= MIN_RISING_POINTS:
-      scored = _open3d_cloud(_even(rising, SOURCE_POINTS))
-  fitness = np.array([o3d.pipelines.registration.evaluate_registration(
-      scored, target, FIT_DISTANCE, t).fitness for t in refined])
-  return int(np.argmax(fitness)), refined, fitness
+  """Candidate poses T_12 [k, 4, 4] of cloud 2 in cloud 1 (points [N, 3] metres near the
+  origin, z up, or their `target` and `source`) -> (index of the best, each candidate
+  refined by ICP [k, 4, 4], their fitness [k]: the share of cloud 2's points that rise
+  from the ground (`score_on` 'rising'; 'all': of all its points) within FIT_DISTANCE of
+  cloud 1). Coarse to fine: candidates that could win (`PRESCORE_DISTANCE`) are aligned
+  by a coarse ICP, best pre-score first; the FINE_CANDIDATES best of those are refined in
+  full. A candidate that could not overtake keeps its pose and its fitness there; the
+  fitness of one aligned only coarsely is its coarse one. Ties keep the earlier
+  candidate (RANSAC's order). Deterministic."""
+  tgt = points1 if isinstance(points1, icp.Surface) else target(points1)
+  if isinstance(points2, Source):
+    if score_on != SCORE_ON:
+      raise ValueError('score_on is chosen when the Source is made (verification.source)')
+    src = points2
+  else:
+    src = source(points2, score_on)
+  candidates = np.asarray(candidates, np.float64)
+  prescore = np.array([fitness(tgt, src.scored, t, PRESCORE_DISTANCE) for t in candidates])
+  refined = candidates.copy()
+  scores = np.full(len(candidates), -1.0)
+  aligned = []   # candidates the coarse ICP aligned
+  for c in np.argsort(-prescore, kind='stable'):
+    twin = next((d for d in aligned if _close(candidates[c], candidates[d], SAME_START)
+                 or _close(candidates[c], refined[d], SAME_START)), None)
+    if twin is not None:
+      refined[c], scores[c] = refined[twin], scores[twin]
+    elif aligned and prescore[c] <= scores.max():
+      scores[c] = fitness(tgt, src.scored, candidates[c])
+    else:
+      refined[c] = icp.point_to_plane(tgt, src.coarse, candidates[c], ICP_DISTANCES[:1],
+                                      COARSE_ITERATIONS)[0]
+      scores[c] = fitness(tgt, src.scored, refined[c])
+      aligned.append(c)
+  fine = set()
+
+  def refine(c):   # in full, with every candidate that shares its coarse result
+    t = icp.point_to_plane(tgt, src.points, refined[c], ICP_DISTANCES, ICP_ITERATIONS)[0]
+    score = fitness(tgt, src.scored, t)
+    for d in np.flatnonzero(np.all(refined == refined[c], axis=(1, 2))):
+      refined[d], scores[d] = t, score
+      fine.add(int(d))
+
+  for c in ransac.distinct_best(refined, scores, FINE_CANDIDATES, SAME_START):
+    if scores[c] >= scores.max() - FINE_MARGIN and c not in fine:
+      refine(c)
+  # The answer is refined in full: a coarse-only pose that scores best is refined too.
+  while (best := int(np.argmax(scores))) not in fine:
+    refine(best)
+  return best, refined, scores

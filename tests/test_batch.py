@@ -1,0 +1,77 @@
+"""Many pairs in one process: each cloud computed once, the same poses as one pair at a time."""
+
+import numpy as np
+import pytest
+
+from ssd_jax import geometry, pretrained
+from ssd_jax.data import io
+from ssd_jax.registration import batch, icp, metrics, pipeline, verification
+from tests.conftest import shared_path
+
+
+def _views(tmp_path):
+  """A real scan (cloud a) and two views of it turned and moved, written as .npy files
+  -> ({name: path}, {name: T_a,name})."""
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
+  scan = scan[np.linalg.norm(scan[:, :2], axis=1) < 40]
+  paths, truth = {'a': str(tmp_path / 'a.npy')}, {'a': np.eye(4)}
+  np.save(paths['a'], scan[::2])
+  for n, (yaw, shift) in enumerate(((40.0, [3.0, -2.0, 0.1]), (-120.0, [-4.0, 1.0, 0.0]))):
+    t = geometry.make_transform(geometry.rotation_z(np.radians(yaw)), np.array(shift))
+    name = 'bc'[n]
+    paths[name], truth[name] = str(tmp_path / f'{name}.npy'), t
+    np.save(paths[name], (scan[1::2] - t[:3, 3]) @ t[:3, :3])
+  return paths, truth
+
+
+@pytest.mark.real_data
+@pytest.mark.slow
+def test_registrar_reads_and_prepares_each_cloud_once_and_registers_as_one_pair(tmp_path):
+  paths, truth = _views(tmp_path)
+  reads = []
+
+  def read(path):
+    reads.append(path)
+    return np.load(path)
+
+  model = pretrained.load('ours')
+  registrar = batch.Registrar(read, model=model)
+  pairs = [('a', 'b'), ('a', 'c'), ('b', 'c')]
+  results = {pair: registrar.register(paths[pair[0]], paths[pair[1]])[0] for pair in pairs}
+  assert sorted(reads) == sorted(paths.values())            # each cloud read once
+  assert set(results['a', 'b'].seconds) == set(batch.STAGES)
+  assert 'read' not in results['b', 'c'].seconds            # both met before
+  for (one, two), reg in results.items():
+    t_true = np.linalg.inv(truth[one]) @ truth[two]
+    err = metrics.registration_errors(t_true, reg.transform)
+    assert err['rte'] < 0.1 and err['rre_geodesic'] < 0.3, (one, two, err)
+  alone, _, _ = pipeline.register(np.load(paths['a']), np.load(paths['c']), 'auto', 'learned',
+                                  model, estimator='upright', verify_candidates=10,
+                                  bev_candidates=5)
+  np.testing.assert_allclose(results['a', 'c'].transform, alone.transform, atol=1e-6)
+  with pytest.raises(ValueError, match='bev needs the upright estimator'):
+    batch.Registrar(read, estimator='rigid')
+
+
+@pytest.mark.real_data
+def test_verification_aligns_only_the_candidates_that_could_win(monkeypatch):
+  """The true pose (0.4 m off) and four poses 10-30 m off: ICP aligns the first, coarse
+  then fine, and none of the others, whose share of cloud 2 within PRESCORE_DISTANCE of
+  cloud 1 is below the aligned pose's share within FIT_DISTANCE."""
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
+  t_true = geometry.make_transform(geometry.rotation_z(np.radians(60.0)), np.array([5.0, 2.0, 0.0]))
+  cloud2 = (scan[1::2] - t_true[:3, 3]) @ t_true[:3, :3]
+  near = t_true @ geometry.make_transform(np.eye(3), np.array([0.3, -0.25, 0.0]))
+  far = [t_true @ geometry.make_transform(geometry.rotation_z(np.radians(a)), np.array([d, 0, 0]))
+         for a, d in ((0, 10.0), (30, 15.0), (90, 20.0), (180, 30.0))]
+  calls = []
+  original = icp.point_to_plane
+  monkeypatch.setattr(icp, 'point_to_plane',
+                      lambda *a, **k: calls.append(len(a[1])) or original(*a, **k))
+  best, refined, fitness = verification.verify(scan[::2], cloud2, np.stack([*far[:2], near, *far[2:]]))
+  assert best == 2 and len(calls) == 2                     # coarse, then fine, of one pose
+  assert calls[0] <= verification.COARSE_POINTS < calls[1]
+  err = metrics.registration_errors(t_true, refined[best])
+  assert err['rte'] < 0.05 and err['rre_geodesic'] < 0.2, err
+  assert fitness[best] > 0.8 and np.all(np.delete(fitness, best) < 0.3)
+  np.testing.assert_array_equal(np.delete(refined, best, 0), np.stack(far))   # left as they were
