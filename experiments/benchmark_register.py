@@ -20,7 +20,7 @@ Methods, each on every pair of each set (`--num_pairs`: the first N, 0 all):
     Open3D, numpy and the file reader only.
   * kiss_matcher: KISS-Matcher (PyPI `kiss-matcher`, 0.3 m voxels, its defaults) and
     Open3D's point-to-plane ICP (1 m, then 0.5 m correspondences), the speed to beat;
-    an optional benchmark dependency (`pip install kiss-matcher`), skipped with one line
+    an optional benchmark dependency (`pip install -e '.[bench]'`), skipped with one line
     where it is not installed.
 
 Loop closure (`--loop_scans=N`): the register command over every pair among the first N
@@ -76,7 +76,7 @@ def _kiss_matcher():
   try:
     import kiss_matcher  # pylint: disable=g-import-not-at-top  (optional anchor)
   except ImportError:
-    print('kiss_matcher: not installed (pip install kiss-matcher); its rows are skipped')
+    print("kiss_matcher: not installed (pip install -e '.[bench]'); its rows are skipped")
     return None
   return kiss_matcher
 

@@ -57,3 +57,25 @@ def test_registration_benchmark_refuses_a_negative_size_in_one_line(synthetic_ro
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
   assert out.returncode != 0 and out.stderr.strip() == (
       'error: --dense and --tile must be >= 0 points (0: none), got 0 and -5')
+
+
+@pytest.mark.multiprocess
+@pytest.mark.slow
+def test_register_benchmark_sets_the_defaults_beside_an_anchor_on_the_same_pairs(synthetic_root):
+  """benchmark_register's table: the register command's batch rows (per pair from its CSV,
+  and the whole command), Open3D's pipeline on the same pairs, the ratio of the two
+  medians, a loop-closure list of every pair of 3 scans, and the seconds of each stage."""
+  out = subprocess.run([sys.executable, '-m', 'experiments.benchmark_register',
+                        f'--datasets={synthetic_root / "test_kitti"}', '--num_pairs=2',
+                        '--cold_pairs=0', '--loop_scans=3', '--methods=register,open3d'],
+                       cwd=ROOT, capture_output=True, text=True, timeout=600)
+  assert out.returncode == 0, out.stderr[-3000:]
+  rows = [[c.strip() for c in l.strip().strip('|').split('|')]
+          for l in out.stdout.splitlines() if l.startswith('| ')]
+  batch = [r for r in rows if r[2] == 'batch (`--pairs`), in its CSV'][0]
+  anchor = [r for r in rows if r[1].startswith('Open3D')][0]
+  assert batch[3] == anchor[3] == '2' and batch[6] == '100.0 %', batch
+  assert float(batch[8]) == pytest.approx(float(batch[4]) / float(anchor[4]), abs=0.01)
+  assert any(r[0] == 'loop closure: every pair of 3 scans' and r[3] == '3' for r in rows)
+  stages = [r for r in rows if r[0] == str(synthetic_root / 'test_kitti') and r[1][:1].isdigit()]
+  assert stages and all(float(v) >= 0 for v in stages[0][1:]), stages
