@@ -95,10 +95,7 @@ def structure_image(points: np.ndarray, resolution: float = RESOLUTION,
   if not len(points):
     return image
   rising = points[rising_from_ground(points)]
-  ij = np.floor(rising[:, :2] / resolution).astype(np.int64) + size // 2
-  ij = ij[((ij >= 0) & (ij < size)).all(1)]
-  image[ij[:, 0], ij[:, 1]] = 1.0
-  return ndimage.gaussian_filter(image, BLUR)
+  return ndimage.gaussian_filter(_splat(rising[None, :, :2], resolution, size)[0], BLUR)
 
 
 @dataclasses.dataclass(frozen=True)
