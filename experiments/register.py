@@ -79,8 +79,9 @@ flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding this pair (op
 flags.DEFINE_bool('icp', False, 'Refine with point-to-plane ICP (1 m, then 0.5 m) after RANSAC.')
 flags.DEFINE_integer('seed', 0, 'RANSAC / random-keypoint seed.')
 flags.DEFINE_integer('draws', None, 'Learned descriptors: average this many random samplings '
-                     "of each ball (0: the model's own setting; default 1 where the poses are "
-                     "verified (--verify > 0), else the model's).")
+                     "of each ball (0: the model's own setting). Default: where the poses are "
+                     'verified (--verify > 0), one sampling of 32 points '
+                     "(pipeline.verified_model), else the model's own.")
 flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m FPFH search (normals: '
                      '1 m, 30 neighbours).')
 flags.DEFINE_float('voxel', None, "Put each cloud on this grid (metres) first; default the "
@@ -237,8 +238,8 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
 
 
 def _load_model(checkpoint: str):
-  """The model named by --checkpoint, describing with --draws samplings (by default
-  `pipeline.VERIFIED_DRAWS` where the poses are verified, else the model's own)."""
+  """The model named by --checkpoint, describing with --draws samplings (by default as
+  `pipeline.verified_model` where the poses are verified, else as the model's own)."""
   if FLAGS.draws is not None and FLAGS.draws < 0:
     raise ValueError(f'--draws must be >= 0, got {FLAGS.draws}')
   model = pretrained.load(checkpoint)
@@ -339,6 +340,7 @@ def main(argv):
            'voxel': voxel, 'points': [len(clouds[0]), len(clouds[1])],
            'correspondence_set_size': reg.correspondence_set_size,
            'draws': model.draws if descriptor == 'learned' else None,
+           'num_samples': model.num_samples if descriptor == 'learned' else None,
            'seconds': {**{f'cloud1_{k}': v for k, v in f1.seconds.items()},
                        **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds,
                        **read_seconds}}

@@ -9,6 +9,7 @@ checkpoint that restore would pick up.
 from __future__ import annotations
 
 import gc
+import logging as py_logging
 import os
 import sys
 from typing import Any, Callable
@@ -45,6 +46,14 @@ def _drop_failed_reads() -> None:
 
   hook.drops_failed_reads = True
   sys.unraisablehook = hook
+  # A future that held such a read's error is logged by asyncio instead when the event
+  # loop collects it (which of the two happens depends on timing).
+  py_logging.getLogger('asyncio').addFilter(_drop_failed_read_records)
+
+
+def _drop_failed_read_records(record: py_logging.LogRecord) -> bool:
+  error = record.exc_info[1] if record.exc_info else ''
+  return not library_text.names_a_failed_array_read(f'{record.getMessage()} {error}')
 
 
 class Checkpointer:

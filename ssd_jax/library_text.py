@@ -55,8 +55,13 @@ def is_failed_array_read(unraisable) -> bool:
   reported: the coroutine, or the tensorstore error it left in a future (an object of
   `sys.unraisablehook`)."""
   name = getattr(unraisable.object, '__qualname__', '') or repr(unraisable.object)
-  text = str(unraisable.exc_value)
-  return ('_read_array' in name or 'Encountered error while reading array' in text
+  return '_read_array' in name or names_a_failed_array_read(str(unraisable.exc_value))
+
+
+def names_a_failed_array_read(text: str) -> bool:
+  """True when an error's text (or a log line quoting it, such as asyncio's "Future
+  exception was never retrieved") is an orbax array read of a damaged checkpoint."""
+  return ('Encountered error while reading array' in text
           or ('OUT_OF_RANGE' in text and 'OCDBT' in text) or 'Event loop is closed' in text)
 
 

@@ -6,8 +6,13 @@ from pathlib import Path
 
 import pytest
 
+from ssd_jax import cli
 from ssd_jax.configs import cpu_small, synthetic
 from ssd_jax.synthetic import dataset
+
+# The tests in this process load what an earlier one compiled, as the commands they start
+# do (the same folder): many build the same train step and registration kernels anew.
+cli.enable_compilation_cache(cli.default_compilation_cache())
 
 SHARED_DATA = Path(os.environ.get('SSD_JAX_SHARED_DATA',
                                   Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data'))

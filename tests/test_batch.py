@@ -75,3 +75,36 @@ def test_verification_aligns_only_the_candidates_that_could_win(monkeypatch):
   assert err['rte'] < 0.05 and err['rre_geodesic'] < 0.2, err
   assert fitness[best] > 0.8 and np.all(np.delete(fitness, best) < 0.3)
   np.testing.assert_array_equal(np.delete(refined, best, 0), np.stack(far))   # left as they were
+
+
+@pytest.mark.real_data
+def test_verification_sharing_a_memo_repeats_no_icp_and_gives_the_same_result(monkeypatch):
+  """RANSAC's candidates verified, then those and more with the same memo (as
+  pipeline.verify does before and after the BEV search): the second call aligns only
+  what the first did not, and its answer is that of one call on all candidates."""
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
+  t_true = geometry.make_transform(geometry.rotation_z(np.radians(-30.0)), np.array([4.0, 1.0, 0.0]))
+  cloud2 = (scan[1::2] - t_true[:3, 3]) @ t_true[:3, :3]
+  moved = lambda yaw, x: t_true @ geometry.make_transform(geometry.rotation_z(np.radians(yaw)),
+                                                          np.array([x, 0.4, 0.0]))
+  first = np.stack([moved(0.0, 6.0), moved(3.0, 0.8), moved(-2.0, -5.0)])
+  more = np.concatenate([first, np.stack([moved(1.0, 0.2), moved(90.0, 12.0)])])
+  target, source = verification.target(scan[::2]), verification.source(cloud2)
+  calls = []
+  original = icp.point_to_plane
+  monkeypatch.setattr(icp, 'point_to_plane',
+                      lambda *a, **k: calls.append(1) or original(*a, **k))
+  alone = verification.verify(target, source, more)
+  in_one = len(calls)
+  memo = {}
+  verification.verify(target, source, first, memo=memo)
+  calls.clear()
+  again = verification.verify(target, source, first, memo=memo)
+  assert not calls                                         # everything was kept
+  both = verification.verify(target, source, more, memo=memo)
+  assert len(calls) <= in_one
+  assert again[0] == verification.verify(target, source, first)[0]
+  assert both[0] == alone[0]
+  np.testing.assert_array_equal(both[1], alone[1])
+  np.testing.assert_array_equal(both[2], alone[2])
+  assert metrics.registration_errors(t_true, both[1][both[0]])['rte'] < 0.05

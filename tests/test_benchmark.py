@@ -36,7 +36,8 @@ def test_registration_benchmark_prints_every_regime_with_the_dense_one(synthetic
   pair of 25-scan tiles of 50,000 points, moved by the pair's transform."""
   out = subprocess.run([sys.executable, '-m', 'experiments.benchmark_registration',
                         f'--dataset={synthetic_root / "test_kitti"}', '--num_pairs=2',
-                        '--cold_pairs=1', '--methods=fpfh', '--dense=100000', '--tile=50000'],
+                        '--cold_pairs=1', '--methods=learned', '--draws=1', '--dense=100000',
+                        '--tile=50000'],
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
   assert out.returncode == 0, out.stderr[-3000:]
   rows = [l for l in out.stdout.splitlines() if l.startswith('| project') or

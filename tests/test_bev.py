@@ -102,12 +102,35 @@ def test_verification_with_bev_candidates_registers_where_every_ransac_pose_is_w
   assert not metrics.registration_errors(t_true, pipeline.verify(reg, f, f, cloud1,
                                                                  cloud2).transform)['success']
   verified = pipeline.verify(reg, f, f, cloud1, cloud2, bev_candidates=3)
-  assert len(verified.verified_fitness) == 6
+  assert len(verified.verified_fitness) == 6 and verified.seconds['bev'] > 0
   err = metrics.registration_errors(t_true, verified.transform)
   assert err['rte'] < 0.1 and err['rre_geodesic'] < 0.3, err
   with pytest.raises(ValueError, match='needs the upright estimator'):
     pipeline.register(cloud1, cloud2, 'auto', 'fpfh', estimator='rigid', verify_candidates=1,
                       bev_candidates=3)
+
+
+@pytest.mark.real_data
+def test_a_ransac_pose_that_fits_confidently_is_taken_without_the_bev_search(monkeypatch):
+  """RANSAC's candidates hold the true pose (0.3 m off) beside two 8 m off: it lays more
+  than CONFIDENT_FITNESS of cloud 2 on cloud 1, so the BEV search is not run, and the
+  answer is the one verifying RANSAC's candidates alone gives."""
+  cloud1, cloud2, t_true = _pair(-65.0, [-20.0, 6.0, 0.0])
+  off = lambda d: t_true @ geometry.make_transform(np.eye(3), np.array([d, 0.0, 0.0]))
+  candidates = np.stack([off(8.0), off(0.3), off(-8.0)])
+  f = pipeline.CloudFeatures(cloud2[:10], np.eye(10), {})
+  reg = pipeline.Registration(candidates[0], np.stack([np.arange(10)] * 2, 1),
+                              np.zeros(10, bool), 0, {}, candidates=candidates)
+  searches = []
+  original = bev.search
+  monkeypatch.setattr(bev, 'search', lambda *a, **k: searches.append(1) or original(*a, **k))
+  verified = pipeline.verify(reg, f, f, cloud1, cloud2, bev_candidates=5)
+  assert not searches and len(verified.verified_fitness) == 3
+  assert verified.verified_fitness.max() >= verification.CONFIDENT_FITNESS
+  assert verified.seconds['bev'] == 0.0
+  np.testing.assert_array_equal(verified.transform,
+                                pipeline.verify(reg, f, f, cloud1, cloud2).transform)
+  assert metrics.registration_errors(t_true, verified.transform)['rte'] < 0.1
 
 
 def _box(cx: float, cy: float, size=(2.0, 1.0, 1.6), step: float = 0.2) -> np.ndarray:

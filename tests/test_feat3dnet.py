@@ -216,7 +216,7 @@ def _attention_grad(config):
     variables = {'params': params, 'batch_stats': state.batch_stats}
     return objective.self_supervised_loss(model, variables, jax.random.key(1), pts,
                                           jnp.ones(pts.shape[:2], bool), config.model)[0]
-  return jax.grad(loss)(state.params)['detector']['attention']['kernel']
+  return jax.jit(jax.grad(loss))(state.params)['detector']['attention']['kernel']
 
 
 @pytest.mark.slow
@@ -355,7 +355,7 @@ def test_triplet_loss_reaches_the_orientation_head_in_stage_2(tiny_config, head)
     variables = {'params': params, 'batch_stats': state.batch_stats}
     return objective.triplet_loss(model, variables, jax.random.key(1), pts,
                                   jnp.ones(pts.shape[:3], bool), config.model)[0]
-  grads = jax.grad(loss)(state.params)['detector']['orientation']
+  grads = jax.jit(jax.grad(loss))(state.params)['detector']['orientation']
   assert all(float(jnp.abs(g).max()) > 1e-7 for g in jax.tree.leaves(grads))
 
 

@@ -23,6 +23,16 @@ def test_least_axis_is_the_eigenvector_of_the_smallest_eigenvalue():
   dot = np.abs(np.sum(icp.least_axis(cov) * vectors[:, :, 0], 1))
   np.testing.assert_allclose(dot, 1.0, atol=1e-9)
   np.testing.assert_array_equal(icp.least_axis(np.eye(3)[None]), [[0.0, 0.0, 1.0]])
+  assert icp.least_axis(np.zeros((0, 3, 3))).shape == (0, 3)
+
+
+def test_isolated_points_get_the_default_normal():
+  """Points more than a normal radius from any other (a sparse tile's far returns) have no
+  plane: (0, 0, 1), as with too few neighbours, also when every queried point is one."""
+  points = np.array([[0.0, 0, 0], [5, 0, 0], [10, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0.01]])
+  surface = icp.surface(points)
+  np.testing.assert_array_equal(surface.normals_at(np.array([1, 2])), [[0, 0, 1.0]] * 2)
+  assert abs(surface.normals_at(np.array([0]))[0, 2]) > 0.99
 
 
 @pytest.mark.real_data

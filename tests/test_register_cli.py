@@ -100,10 +100,11 @@ def test_register_cli_describes_with_the_shipped_model_by_default(tiny_set, tmp_
   assert out.returncode == 0, out.stderr[-3000:]
   result = json.loads((tmp_path / 'r.json').read_text())
   assert result['descriptor'] == 'learned' and result['model'] == 'ours'
-  # Verified poses: one sampling of each ball (a quarter of the network's work), not the
-  # model's own 4 (the paper's protocol).
+  # Verified poses: one sampling of 32 points of each ball (an eighth of the network's
+  # work), not the model's own 4 of 64 (the paper's protocol).
   assert result['draws'] == pipeline.VERIFIED_DRAWS == 1
-  assert pretrained.load('ours').draws == 4
+  assert result['num_samples'] == pipeline.VERIFIED_SAMPLES == 32
+  assert (pretrained.load('ours').draws, pretrained.load('ours').num_samples) == (4, 64)
   assert result['errors']['success'], result
   # --draws=0: the model's own setting; the same pair registers alike.
   out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
@@ -111,7 +112,8 @@ def test_register_cli_describes_with_the_shipped_model_by_default(tiny_set, tmp_
              f'--json={tmp_path / "r4.json"}')
   assert out.returncode == 0, out.stderr[-3000:]
   four = json.loads((tmp_path / 'r4.json').read_text())
-  assert four['draws'] == 4 and four['errors']['success'] and four['T_12'] != result['T_12']
+  assert four['draws'] == 4 and four['num_samples'] == 64
+  assert four['errors']['success'] and four['T_12'] != result['T_12']
 
 
 @pytest.mark.multiprocess

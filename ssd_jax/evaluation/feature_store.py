@@ -188,10 +188,11 @@ class FeatureStore:
   def features(self, path: str | os.PathLike, row: str) -> pipeline.CloudFeatures:
     """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud. A learned descriptor
     of a row that verifies its poses describes as the register command's defaults do
-    (`pipeline.VERIFIED_DRAWS` samplings of each ball)."""
+    (`pipeline.verified_model`: VERIFIED_DRAWS samplings of VERIFIED_SAMPLES points)."""
     kp, desc = split_row(row)
     verified = row_verifies(row) and desc not in BUILTIN_DESCRIPTORS
-    name = f'{desc}@draws={pipeline.VERIFIED_DRAWS}' if verified else desc
+    name = (f'{desc}@draws={pipeline.VERIFIED_DRAWS},c={pipeline.VERIFIED_SAMPLES}'
+            if verified else desc)
     key = (str(path), kp, name)
     if key not in self._descriptors:
       points, idx = self.cloud(path), self.keypoints(path, kp)

@@ -78,7 +78,7 @@ def least_axis(cov: np.ndarray) -> np.ndarray:
   """Symmetric positive semi-definite cov [N, 3, 3] -> unit eigenvectors [N, 3] of the
   smallest eigenvalue, in closed form (the trigonometric eigenvalues of a 3 x 3, then the
   widest cross product of two rows of cov - lambda I): ~10x np.linalg.eigh's speed."""
-  scale = np.abs(cov).reshape(len(cov), -1).max(1)
+  scale = np.abs(cov).reshape(len(cov), 9).max(1)
   a = cov / np.where(scale > 0, scale, 1.0)[:, None, None]
   q = np.trace(a, axis1=1, axis2=2) / 3.0
   off = a[:, 0, 1] ** 2 + a[:, 0, 2] ** 2 + a[:, 1, 2] ** 2

@@ -36,18 +36,24 @@ VOXEL_SIZE = 0.2
 ON_GRID = 0.6
 
 
-# Samplings of each ball the learned descriptor averages where the candidate poses are
-# verified against the clouds (the register defaults). More draws steady the matches that
-# RANSAC's best pose alone depends on (the shipped models' 4, for the paper's protocol); with
-# the BEV search and the verification picking the pose, one draw registered every pair that
-# four did on every set of the README's table, at a quarter of the network's work
+# How the learned descriptor samples each ball where the candidate poses are verified
+# against the clouds (the register defaults): one draw of 32 points, as the shipped models
+# trained. More points and draws steady the matches that RANSAC's best pose alone depends on
+# (the shipped models' 4 draws of 64 points, for the paper's protocol); with the BEV search
+# and the verification picking the pose, one draw of 32 registered every pair that four of
+# 64 did on every set of the README's table, at an eighth of the network's work
 # (docs/benchmarks.md).
 VERIFIED_DRAWS = 1
+VERIFIED_SAMPLES = 32
 
 
 def verified_model(model):
-  """`model` (an `inference.Model`, or None) describing with VERIFIED_DRAWS samplings."""
-  return None if model is None else dataclasses.replace(model, draws=VERIFIED_DRAWS)
+  """`model` (an `inference.Model`, or None) describing with VERIFIED_DRAWS samplings of
+  VERIFIED_SAMPLES points (of its own num_samples, where fewer)."""
+  if model is None:
+    return None
+  return dataclasses.replace(model, draws=VERIFIED_DRAWS,
+                             num_samples=min(model.num_samples, VERIFIED_SAMPLES))
 
 
 @dataclasses.dataclass
@@ -227,23 +233,32 @@ def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1, poi
   most of cloud 2's structure on cloud 1 (`verification.verify`). points1, points2: the
   clouds [N, 3] (metres near the origin, in the features' coordinates) or their
   `prepared.PreparedCloud`s, which keep what is made of a cloud for its next pair. With
-  `bev_candidates` b > 0 (upright scans), the b best poses of the bird's-eye-view search
-  (`bev.search`) are checked after RANSAC's. Inliers and the RegistrationResult numbers
-  are recounted over the matches under the chosen pose; `seconds` gains 'bev' and
-  'verify'."""
+  `bev_candidates` b > 0 (upright scans), unless RANSAC's best already lays
+  `verification.CONFIDENT_FITNESS` of cloud 2's structure on cloud 1, the b best poses of
+  the bird's-eye-view search (`bev.search`) are checked too, after RANSAC's, all together.
+  Inliers and the RegistrationResult numbers are recounted over the matches under the
+  chosen pose; `verified_fitness` has one entry per candidate checked (k, or k + b);
+  `seconds` gains 'bev' (0 where it was not needed) and 'verify'."""
   t0 = time.perf_counter()
   cloud1, cloud2 = prepared.prepare(points1), prepared.prepare(points2)
   candidates = reg.candidates if reg.candidates is not None else reg.transform[None]
+  memo = {}   # the second call below repeats no ICP of the first
+  best, refined, fitness = verification.verify(cloud1.target, cloud2.source, candidates,
+                                               memo=memo)
+  seconds = {**reg.seconds, 'verify': time.perf_counter() - t0}
   if bev_candidates > 0:
-    candidates = np.concatenate([candidates, bev.search(cloud1.footprint, cloud2.footprint,
-                                                        bev_candidates).transforms])
-  t1 = time.perf_counter()
-  best, refined, fitness = verification.verify(cloud1.target, cloud2.source, candidates)
+    seconds['bev'] = 0.0
+    if fitness[best] < verification.CONFIDENT_FITNESS:
+      t1 = time.perf_counter()
+      candidates = np.concatenate([candidates, bev.search(cloud1.footprint, cloud2.footprint,
+                                                          bev_candidates).transforms])
+      t2 = time.perf_counter()
+      best, refined, fitness = verification.verify(cloud1.target, cloud2.source, candidates,
+                                                   memo=memo)
+      seconds['bev'] = t2 - t1
+      seconds['verify'] += time.perf_counter() - t2
   xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[reg.matches[:, 1]].astype(np.float64)
   inliers, stats = _match_stats(xyz1, xyz2, refined[best], inlier_threshold)
-  seconds = {**reg.seconds, 'verify': time.perf_counter() - t1}
-  if bev_candidates > 0:
-    seconds['bev'] = t1 - t0
   return dataclasses.replace(reg, transform=refined[best], inliers=inliers, seconds=seconds,
                              verified_fitness=fitness, **stats)
 

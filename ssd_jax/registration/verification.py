@@ -56,6 +56,12 @@ PRESCORE_DISTANCE = 1.5
 # already started from or converged to shares that result: RANSAC's and the BEV search's
 # poses of the right answer are often a cell or a yaw step apart.
 SAME_START = (0.5, 1.0)
+# A pose that lays at least this share of cloud 2's structure within FIT_DISTANCE of cloud 1
+# is taken without looking further (`pipeline.verify` skips the BEV search's candidates):
+# no wrong pose of the project's sets came near it (RANSAC's best wrong ones fit <= 0.33),
+# and where RANSAC's best fits this well the BEV search never changed the outcome
+# (docs/registration.md: the register defaults' candidates).
+CONFIDENT_FITNESS = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,8 +118,8 @@ def _close(a: np.ndarray, b: np.ndarray, limits: tuple[float, float]) -> bool:
               and cos > np.cos(np.deg2rad(limits[1])))
 
 
-def verify(points1, points2, candidates: np.ndarray,
-           score_on: str = SCORE_ON) -> tuple[int, np.ndarray, np.ndarray]:
+def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
+           memo: dict | None = None) -> tuple[int, np.ndarray, np.ndarray]:
   """Candidate poses T_12 [k, 4, 4] of cloud 2 in cloud 1 (points [N, 3] metres near the
   origin, z up, or their `target` and `source`) -> (index of the best, each candidate
   refined by ICP [k, 4, 4], their fitness [k]: the share of cloud 2's points that rise
@@ -122,7 +128,9 @@ def verify(points1, points2, candidates: np.ndarray,
   by a coarse ICP, best pre-score first; the FINE_CANDIDATES best of those are refined in
   full. A candidate that could not overtake keeps its pose and its fitness there; the
   fitness of one aligned only coarsely is its coarse one. Ties keep the earlier
-  candidate (RANSAC's order). Deterministic."""
+  candidate (RANSAC's order). Deterministic. `memo`: a dict shared by calls on the same
+  pair of clouds (e.g. RANSAC's candidates, then those and the BEV search's), in which
+  each ICP and fitness is kept under its start pose, so that no call repeats one."""
   tgt = points1 if isinstance(points1, icp.Surface) else target(points1)
   if isinstance(points2, Source):
     if score_on != SCORE_ON:
@@ -131,7 +139,18 @@ def verify(points1, points2, candidates: np.ndarray,
   else:
     src = source(points2, score_on)
   candidates = np.asarray(candidates, np.float64)
-  prescore = np.array([fitness(tgt, src.scored, t, PRESCORE_DISTANCE) for t in candidates])
+  memo = {} if memo is None else memo
+
+  def kept(kind, transform, compute):   # pure functions of the pose for one pair of clouds
+    key = (kind, transform.tobytes())
+    if key not in memo:
+      memo[key] = compute()
+    return memo[key]
+
+  score = lambda t: kept('fit', t, lambda: fitness(tgt, src.scored, t))
+  prescore = np.array([kept('prescore', t, lambda t=t: fitness(tgt, src.scored, t,
+                                                               PRESCORE_DISTANCE))
+                       for t in candidates])
   refined = candidates.copy()
   scores = np.full(len(candidates), -1.0)
   aligned = []   # candidates the coarse ICP aligned
@@ -141,19 +160,20 @@ def verify(points1, points2, candidates: np.ndarray,
     if twin is not None:
       refined[c], scores[c] = refined[twin], scores[twin]
     elif aligned and prescore[c] <= scores.max():
-      scores[c] = fitness(tgt, src.scored, candidates[c])
+      scores[c] = score(candidates[c])
     else:
-      refined[c] = icp.point_to_plane(tgt, src.coarse, candidates[c], ICP_DISTANCES[:1],
-                                      COARSE_ITERATIONS)[0]
-      scores[c] = fitness(tgt, src.scored, refined[c])
+      refined[c] = kept('coarse', candidates[c], lambda c=c: icp.point_to_plane(
+          tgt, src.coarse, candidates[c], ICP_DISTANCES[:1], COARSE_ITERATIONS)[0])
+      scores[c] = score(refined[c])
       aligned.append(c)
   fine = set()
 
   def refine(c):   # in full, with every candidate that shares its coarse result
-    t = icp.point_to_plane(tgt, src.points, refined[c], ICP_DISTANCES, ICP_ITERATIONS)[0]
-    score = fitness(tgt, src.scored, t)
+    t = kept('fine', refined[c], lambda: icp.point_to_plane(
+        tgt, src.points, refined[c], ICP_DISTANCES, ICP_ITERATIONS)[0])
+    fit = score(t)
     for d in np.flatnonzero(np.all(refined == refined[c], axis=(1, 2))):
-      refined[d], scores[d] = t, score
+      refined[d], scores[d] = t, fit
       fine.add(int(d))
 
   for c in ransac.distinct_best(refined, scores, FINE_CANDIDATES, SAME_START):
