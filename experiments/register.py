@@ -48,7 +48,7 @@ from tqdm import auto as tqdm
 from ssd_jax import cli, geometry, pretrained, viz
 from ssd_jax.data import clean, groundtruth, io
 from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.registration import batch, metrics, pipeline
+from ssd_jax.registration import batch, metrics, pipeline, uncertainty
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('cloud1', None, 'Target cloud (its frame is the output frame).')
@@ -93,7 +93,13 @@ flags.DEFINE_string('plot', None, 'Draw the clouds and inlier matches here (PNG)
 flags.DEFINE_string('pairs', None, 'Batch mode: a file of "cloud1 cloud2" lines.')
 flags.DEFINE_string('sequence', None, 'Batch mode: register each scan of this folder to the '
                     'next (sorted by name) and chain the poses.')
-flags.DEFINE_string('out', None, 'Batch mode: output folder.')
+flags.DEFINE_string('out', None, 'Batch mode: output folder. A rerun into the same folder '
+                    'keeps the pairs its registrations.csv holds without an error.')
+flags.DEFINE_bool('allow_degenerate', False, 'Return a pose the scans do not fix (a corridor, '
+                  'tunnel, road between barriers: a shift along it is free) with the verdict, '
+                  'instead of refusing it.')
+flags.DEFINE_bool('stop_on_error', False, 'Batch mode: stop at the first pair that fails '
+                  '(default: record its error in its row and register the others).')
 
 
 def _ground_truth(path, cloud1, cloud2, required=True, pairs=None):
@@ -139,8 +145,21 @@ def _voxel(model) -> float:
 
 
 def _read(path: str) -> np.ndarray:
-  """The cloud at `path`, float64 in the caller's coordinates, NaN rows dropped."""
-  return clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
+  """The cloud at `path`, float64 in the caller's coordinates, NaN rows dropped; one
+  that does not look like metres is a CloudDataError saying so."""
+  cloud = clean.clean_cloud(io.read_cloud(path, FLAGS.format), path, np.float64)
+  problem = clean.units_problem(cloud)
+  if problem:
+    raise clean.CloudDataError(f'{path}: {problem}')
+  return cloud
+
+
+def _refusal(reg) -> str:
+  """'' when the pose may be returned, else the one-line reason it is refused."""
+  free = reg.uncertainty.free if reg.uncertainty is not None else ''
+  if free and not FLAGS.allow_degenerate:
+    return f'degenerate: {free}; --allow_degenerate returns the pose with this verdict'
+  return ''
 
 
 def _read_on_grid(path: str, voxel: float, say, seconds: dict | None = None) -> np.ndarray:
@@ -177,8 +196,35 @@ def _read_pairs(path: str) -> list[tuple[str, str]]:
   return pairs
 
 
+def _csv_header() -> list[str]:
+  return ['cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials', 'seconds',
+          *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)], 'rte', 'rre', 'success',
+          'error', 'degenerate', 'translation_constraint',
+          *[f'least_fixed_translation[{i}]' for i in range(3)], 'smallest_eigenvalue',
+          *[f'smallest_direction[{i}]' for i in range(6)],
+          *[f'information[{i}][{j}]' for i in range(6) for j in range(6)],
+          *[f'seconds_{s}' for s in batch.STAGES]]
+
+
+def _registered_before(path: str, header: list[str]) -> dict:
+  """The rows without an error of an earlier run's registrations.csv at `path`, by pair."""
+  if not os.path.exists(path):
+    return {}
+  with open(path, newline='') as f:
+    rows = list(csv.reader(f))
+  if not rows or rows[0] != header:
+    raise ValueError(f'{path}: written by another version of this command (its columns '
+                     'differ); give another --out or remove it')
+  error = header.index('error')
+  return {(r[0], r[1]): r for r in rows[1:] if len(r) == len(header) and not r[error]}
+
+
 def _batch(descriptor: str, model, checkpoint: str) -> None:
-  """Register every pair of --pairs or consecutive scans of --sequence into --out."""
+  """Register every pair of --pairs or consecutive scans of --sequence into --out. A pair
+  that fails (a missing or bad file, too few keypoints, a degenerate scene) gets its row
+  with the error and the others go on (--stop_on_error: the run stops there); the
+  command then ends non-zero naming how many failed. A rerun keeps the rows of the pairs
+  registered before."""
   if FLAGS.sequence:
     scans = [str(p) for p in io.list_clouds(FLAGS.sequence)]
     if len(scans) < 2:
@@ -188,44 +234,58 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
     pairs = _read_pairs(FLAGS.pairs)
   os.makedirs(FLAGS.out, exist_ok=True)
   gt_pairs = groundtruth.read_groundtruths(FLAGS.groundtruth) if FLAGS.groundtruth else None
-  errors = []
   say = tqdm.tqdm.write if _show_progress() else print
   registrar = batch.Registrar(_read, keypoints=FLAGS.keypoints,
                               descriptor=descriptor, model=model, seed=FLAGS.seed,
                               fpfh_max_nn=FLAGS.fpfh_max_nn, voxel=_voxel(model),
                               estimator=FLAGS.ransac, verify=FLAGS.verify,
                               bev=_bev_candidates(), say=say)
-
-  transforms = []
-  with open(os.path.join(FLAGS.out, 'registrations.csv'), 'w', newline='') as f:
+  header, path = _csv_header(), os.path.join(FLAGS.out, 'registrations.csv')
+  before = _registered_before(path, header)
+  # Rewritten whole before any new row is added: a run stopped at any moment keeps them.
+  with open(path + '.tmp', 'w', newline='') as f:
+    csv.writer(f).writerows([header, *(before[p] for p in pairs if p in before)])
+  os.replace(path + '.tmp', path)
+  transforms, failed = [], []
+  t_index = header.index('T_12[0][0]')
+  with open(path, 'a', newline='') as f:
     writer = csv.writer(f)
-    writer.writerow(['cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials',
-                     'seconds', *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)],
-                     'rte', 'rre', 'success', 'error', *[f'seconds_{s}' for s in batch.STAGES]])
     for cloud1, cloud2 in tqdm.tqdm(pairs, desc='registration', unit='pair',
                                     disable=not _show_progress()):
+      if (cloud1, cloud2) in before:
+        row = before[cloud1, cloud2]
+        transforms.append(np.array(row[t_index:t_index + 16], np.float64).reshape(4, 4))
+        failed.append(False)
+        continue
       start = time.perf_counter()
+      keypoints, inliers, trials, stages, assessed = (0, 0), 0, 0, {}, None
       try:
         reg, f1, f2 = registrar.register(cloud1, cloud2)
-        t, inliers, trials, error = reg.transform, int(reg.inliers.sum()), reg.trials, ''
-        keypoints, stages = (len(f1.xyz), len(f2.xyz)), reg.seconds
-      except (io.CloudFileError, clean.CloudDataError):
-        raise   # a bad file ends the run, named
-      except ValueError as e:   # too few keypoints, a flat cloud: a failed pair, not a failed run
-        t, inliers, trials, error, keypoints, stages = np.eye(4), 0, 0, str(e), (0, 0), {}
+        keypoints, inliers, trials = (len(f1.xyz), len(f2.xyz)), int(reg.inliers.sum()), reg.trials
+        stages, assessed, error = reg.seconds, reg.uncertainty, _refusal(reg)
+      except (io.CloudFileError, clean.CloudDataError, OSError, ValueError) as e:
+        error = str(e)   # a bad file, too few keypoints, a flat cloud: this pair only
+      if error and FLAGS.stop_on_error:
+        raise ValueError(f'{cloud1} / {cloud2}: {error}')
+      t = reg.transform if not error else np.eye(4)
       transforms.append(t)
-      errors.append(bool(error))
+      failed.append(bool(error))
       t_gt = (_ground_truth(FLAGS.groundtruth, cloud1, cloud2, False, gt_pairs)
-              if gt_pairs is not None else None)
+              if gt_pairs is not None and not error else None)
       gt = metrics.registration_errors(t_gt, t) if t_gt is not None else {}
+      pose = ([assessed.free, f'{assessed.translation_constraint[0]:.6g}',
+               *[f'{v:.6g}' for v in assessed.translation_directions[0]],
+               f'{assessed.eigenvalues[0]:.6g}', *[f'{v:.6g}' for v in assessed.directions[0]],
+               *[f'{v:.10g}' for v in assessed.information.ravel()]]
+              if assessed is not None else [''] * 48)
       writer.writerow([cloud1, cloud2, *keypoints, inliers, trials,
                        f'{time.perf_counter() - start:.3f}', *t.ravel().tolist(),
                        gt.get('rte', ''), gt.get('rre', ''), gt.get('success', ''), error,
-                       *[f'{stages[s]:.4f}' if s in stages else '' for s in batch.STAGES]])
+                       *pose, *[f'{stages[s]:.4f}' if s in stages else '' for s in batch.STAGES]])
       f.flush()   # a stopped run keeps the pairs it registered
-  print(f'wrote {os.path.join(FLAGS.out, "registrations.csv")}: {len(pairs)} pairs, '
-        f'{descriptor} descriptors ({checkpoint if descriptor == "learned" else "Open3D"}), '
-        f'{sum(errors)} without enough keypoints')
+  kept = sum(p in before for p in pairs)
+  print(f'wrote {path}: {len(pairs)} pairs' + (f' ({kept} kept from an earlier run)' if kept else '')
+        + f', {descriptor} descriptors ({checkpoint if descriptor == "learned" else "Open3D"})')
   if FLAGS.sequence:
     poses = [np.eye(4)]
     for t in transforms:   # T_{i,i+1} maps scan i+1 into scan i: P_{i+1} = P_i T_{i,i+1}
@@ -233,8 +293,11 @@ def _batch(descriptor: str, model, checkpoint: str) -> None:
     poses = np.stack(poses)
     np.savetxt(os.path.join(FLAGS.out, 'poses.txt'), poses[:, :3, :].reshape(len(poses), 12))
     viz.plot_trajectory(poses, os.path.join(FLAGS.out, 'trajectory.png'),
-                        f'{len(scans)} scans of {FLAGS.sequence}', np.asarray(errors))
+                        f'{len(scans)} scans of {FLAGS.sequence}', np.asarray(failed))
     print(f'wrote {os.path.join(FLAGS.out, "poses.txt")} and trajectory.png')
+  if any(failed):
+    raise ValueError(f'{sum(failed)} of {len(pairs)} pairs failed (the error column of {path} '
+                     'says why; a rerun registers only those)')
 
 
 def _load_model(checkpoint: str):
@@ -328,6 +391,9 @@ def main(argv):
     except ValueError as e:
       bar.close()
       raise SystemExit(f'error: {e}') from None
+    if _refusal(reg):
+      bar.close()
+      raise SystemExit(f'error: {_refusal(reg)}')
     if descriptor == FLAGS.descriptor[-1]:
       bar.close()
     else:
@@ -346,6 +412,7 @@ def main(argv):
                        **read_seconds}}
     if reg.verified_fitness is not None:
       out['verified_fitness'] = reg.verified_fitness.tolist()
+    out['uncertainty'] = reg.uncertainty.to_json()
     if FLAGS.icp:
       out['icp_fitness'] = reg.icp_fitness
     out['seconds']['total'] = time.perf_counter() - start + sum(read_seconds.values())
@@ -364,6 +431,11 @@ def main(argv):
     print('timings (s): ' + ', '.join(f'{k} {v:.2f}' for k, v in out['seconds'].items()))
     print('T_12 =\n' + np.array2string(transform, precision=4, suppress_small=True))
     print(f'overlap fitness (cloud-2 points within 0.5 m of cloud 1): {out["overlap_fitness"]:.3f}')
+    u = reg.uncertainty
+    least = uncertainty.describe_direction(np.append(np.zeros(3), u.translation_directions[0]))
+    print(f'degenerate: {u.free}' if u.free else
+          f'the scans fix the pose: least fixed {least}, constraint '
+          f'{u.translation_constraint[0]:.3f} (free under {uncertainty.MIN_CONSTRAINT})')
     if t_gt is not None:
       e = out['errors']
       print(f'vs ground truth: RTE {e["rte"]:.3f} m, RRE {e["rre"]:.2f} deg (Euler sum), '

@@ -14,6 +14,7 @@ import pytest
 from ssd_jax import geometry, pretrained
 from ssd_jax.data import io, registration_sets
 from ssd_jax.registration import metrics, pipeline
+from ssd_jax.synthetic import degenerate
 from tests.conftest import shared_path
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -380,3 +381,73 @@ def test_a_cloud_too_large_for_memory_fails_in_one_line(tiny_set, monkeypatch):
   with pytest.raises(io.CloudFileError, match=r'000000.bin: ~[\d,]+ points need ~0.\d GiB to read '
                      r'and put on a grid, 0.0 GiB is available; split it into tiles'):
     io.read_cloud(pair.cloud1)
+
+
+@pytest.mark.multiprocess
+@pytest.mark.slow
+def test_a_corridor_is_refused_naming_its_free_direction_or_returned_with_the_verdict(tmp_path):
+  """Two scans 5 m apart along a straight corridor: one line naming the shift along it and
+  a non-zero exit; --allow_degenerate returns the pose with the verdict and the
+  information matrix in the JSON."""
+  cloud1, cloud2, _ = degenerate.scan_pair('corridor')
+  np.save(tmp_path / 'a.npy', cloud1)
+  np.save(tmp_path / 'b.npy', cloud2)
+  args = ('experiments.register', f'--cloud1={tmp_path / "a.npy"}', f'--cloud2={tmp_path / "b.npy"}')
+  out = _run(*args)
+  assert out.returncode == 1
+  (line,) = out.stderr.strip().splitlines()[-1:]
+  assert line.startswith('error: degenerate: translation along (1.00, ') and (
+      'not fixed by the scans' in line and '--allow_degenerate' in line), out.stderr[-2000:]
+  assert 'T_12' not in out.stdout
+  out = _run(*args, '--allow_degenerate', f'--json={tmp_path / "r.json"}')
+  assert out.returncode == 0, out.stderr[-2000:]
+  result = json.loads((tmp_path / 'r.json').read_text())
+  assert result['uncertainty']['free'].startswith('translation along (1.00, ')
+  assert np.array(result['uncertainty']['information_matrix']).shape == (6, 6)
+  assert 'degenerate: translation along' in out.stdout
+
+
+@pytest.mark.multiprocess
+def test_a_cloud_in_millimetres_gets_a_units_hint(tiny_set, tmp_path):
+  pair = registration_sets.read_registration_set(tiny_set / 'test_kitti')[0]
+  np.save(tmp_path / 'mm.npy', io.read_cloud(pair.cloud2).astype(np.float64) * 1000)
+  out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={tmp_path / "mm.npy"}')
+  assert out.returncode == 1 and out.stderr.strip().count('\n') == 0, out.stderr[-2000:]
+  assert out.stderr.startswith(f'error: {tmp_path / "mm.npy"}: its points lie ~')
+  assert 'millimetres or centimetres? ssd_jax reads metres' in out.stderr
+
+
+@pytest.mark.multiprocess
+@pytest.mark.slow
+def test_a_batch_registers_every_pair_it_can_and_a_rerun_resumes(tiny_set, tmp_path):
+  """Three pairs, the second naming a missing file: the first and third registered, the
+  second's row holds the error, the command ends non-zero naming one failed pair. Once the
+  file exists, a rerun registers only that pair. --stop_on_error stops at it."""
+  pairs = registration_sets.read_registration_set(tiny_set / 'test_kitti' / '00')[:2]
+  missing = tmp_path / 'later.bin'
+  (tmp_path / 'pairs.txt').write_text(f'{pairs[0].cloud1} {pairs[0].cloud2}\n'
+                                      f'{pairs[0].cloud1} {missing}\n'
+                                      f'{pairs[1].cloud1} {pairs[1].cloud2}\n')
+  args = ('experiments.register', f'--pairs={tmp_path / "pairs.txt"}', f'--out={tmp_path / "out"}')
+  out = _run(*args)
+  assert out.returncode == 1
+  assert out.stderr.strip().splitlines()[-1].startswith('error: 1 of 3 pairs failed')
+  rows = list(csv.DictReader((tmp_path / 'out' / 'registrations.csv').open()))
+  assert [r['cloud2'] for r in rows] == [str(pairs[0].cloud2), str(missing), str(pairs[1].cloud2)]
+  assert not rows[0]['error'] and not rows[2]['error'] and str(missing) in rows[1]['error']
+  for row, pair in ((rows[0], pairs[0]), (rows[2], pairs[1])):
+    t = np.array([float(row[f'T_12[{i}][{j}]']) for i in range(4) for j in range(4)]).reshape(4, 4)
+    assert metrics.registration_errors(pair.transform, t)['success']
+    assert float(row['translation_constraint']) > 0 and not row['degenerate']
+    assert np.array([float(row[f'information[{i}][{j}]']) for i in range(6)
+                     for j in range(6)]).reshape(6, 6)[3, 3] > 1000
+  missing.write_bytes(pairs[0].cloud2.read_bytes())
+  out = _run(*args)
+  assert out.returncode == 0, out.stderr[-2000:]
+  assert '3 pairs (2 kept from an earlier run)' in out.stdout
+  again = list(csv.DictReader((tmp_path / 'out' / 'registrations.csv').open()))
+  assert again[:2] == [rows[0], rows[2]] and not again[2]['error']
+  missing.unlink()
+  out = _run(*args[:2], f'--out={tmp_path / "stop"}', '--stop_on_error')
+  assert out.returncode == 1 and str(missing) in out.stderr.strip().splitlines()[-1]
+  assert len(list(csv.DictReader((tmp_path / 'stop' / 'registrations.csv').open()))) == 1

@@ -1,12 +1,13 @@
 """Input checks every cloud passes before use: the shape, finite coordinates, enough
 resolution in its floating-point type, not all points in one place. One-line errors
 name the problem (`check_cloud` for library calls, `clean_cloud` for files, which
-drops NaN rows)."""
+drops NaN rows; `units_problem` for a cloud that does not look like metres)."""
 
 from __future__ import annotations
 
 from absl import logging
 import numpy as np
+from scipy import spatial
 
 from ssd_jax import errors
 
@@ -83,3 +84,33 @@ def clean_cloud(points: np.ndarray, name: str = 'cloud', dtype=np.float32) -> np
     raise CloudDataError(f'{name}: degenerate cloud, all {len(points)} points coincide '
                          f'at {points[0].tolist()}')
   return points
+
+
+# A LiDAR cloud in metres: neighbouring points lie centimetres to a few metres apart, and
+# it spans metres to kilometres. Outside these, its numbers are in other units.
+MAX_SPACING = 20.0   # metres: median distance from a point to its nearest neighbour
+MIN_EXTENT = 1.0     # metres: the cloud's longest side
+_SPACING_SAMPLE = 5000
+
+
+def units_problem(points: np.ndarray, seed: int = 0) -> str:
+  """'' for a cloud points [N, 3] whose size and spacing are a LiDAR cloud's in metres,
+  else one line saying what suggests other units. The spacing is that of a random
+  5,000 points, scaled to all N as a surface's (by sqrt(5,000 / N))."""
+  points = np.asarray(points, np.float64)
+  extent = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
+  if extent < MIN_EXTENT:
+    return (f'it spans only {extent:.3g} across, a LiDAR cloud in metres metres to '
+            'kilometres: is it in kilometres? ssd_jax reads metres')
+  sample = points
+  if len(points) > _SPACING_SAMPLE:
+    sample = points[np.random.default_rng(seed).choice(len(points), _SPACING_SAMPLE, False)]
+  if len(sample) < 2:
+    return ''
+  distance, _ = spatial.cKDTree(sample).query(sample, k=2)
+  spacing = float(np.median(distance[:, 1])) * np.sqrt(len(sample) / len(points))
+  if spacing > MAX_SPACING:
+    return (f'its points lie ~{spacing:.3g} apart (median), those of a LiDAR cloud in '
+            'metres centimetres to a metre: is it in millimetres or centimetres? ssd_jax '
+            'reads metres')
+  return ''

@@ -36,7 +36,8 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   pairs: `registration_sets.RegistrationPair`s. Pair n's RANSAC samples are seeded with
   seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
   result holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair
-  with fewer than 3 keypoints in a cloud fails, with its `error`); with
+  with fewer than 3 keypoints in a cloud fails, with its `error`; a verified row's pose that
+  the scans do not fix fails with `refused`, as the register command refuses it); with
   `log`, one JSON line per pair and row is written to it. Over several processes each
   registers its share of the pairs (`distributed.map_items`) and every process returns
   all results; the log is written when they are gathered.
@@ -55,9 +56,11 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
                                 max_trials=max_trials,
                                 estimator=feature_store.row_estimator(row),
                                 candidates=feature_store.VERIFY_CANDIDATES if verify else 1)
-        if verify:
-          reg = pipeline.verify(reg, f1, f2, store.prepared(pair.cloud1), store.prepared(pair.cloud2),
-                                inlier_threshold, feature_store.row_bev_candidates(row))
+        if verify:   # as the register command: verified, then refused if degenerate
+          prepared1, prepared2 = store.prepared(pair.cloud1), store.prepared(pair.cloud2)
+          reg = pipeline.verify(reg, f1, f2, prepared1, prepared2, inlier_threshold,
+                                feature_store.row_bev_candidates(row))
+          reg = pipeline.assess(reg, prepared1, prepared2)
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named
       except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,
@@ -67,6 +70,8 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
       else:
         res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
                    **metrics.registration_errors(pair.transform, reg.transform))
+        if reg.uncertainty is not None and reg.uncertainty.free:   # no pose for the user
+          res.update(success=False, refused=reg.uncertainty.free)
       out.append(res)
       if log is not None and one_process:   # as it goes: a stopped run keeps its pairs
         log.write(json.dumps(res) + '\n')

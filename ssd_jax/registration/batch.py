@@ -23,7 +23,8 @@ from ssd_jax.registration import features as features_lib, pipeline, prepared
 # Clouds kept: a KITTI-size scan costs ~5 MB here (points, normals, KD-tree, footprint).
 CACHE_SIZE = 64
 # What `Registrar.register` times, in order: the first four only for a cloud met first.
-STAGES = ('read', 'grid', 'keypoints', 'descriptors', 'matching', 'ransac', 'bev', 'verify')
+STAGES = ('read', 'grid', 'keypoints', 'descriptors', 'matching', 'ransac', 'bev', 'verify',
+          'assess')
 
 
 @dataclasses.dataclass
@@ -88,7 +89,8 @@ class Registrar:
     """T_12 of the pair (maps cloud 2 into cloud 1) -> (registration, features of cloud 1,
     of cloud 2). `registration.seconds` holds every stage this pair cost: reading,
     gridding, keypoints and descriptors of a cloud met for the first time, matching,
-    RANSAC, the BEV search and the verification. A cloud that cannot be registered (too
+    RANSAC, the BEV search, the verification and the pose's assessment
+    (`registration.uncertainty`). A cloud that cannot be registered (too
     few points, flat) is a ValueError; a bad file the reader's error."""
     seconds = collections.defaultdict(float)
     entries = []
@@ -115,5 +117,6 @@ class Registrar:
     if self.verify > 0:
       reg = pipeline.verify(reg, f1, f2, entries[0].points, entries[1].points,
                             bev_candidates=self.bev)
+    reg = pipeline.assess(reg, entries[0].points, entries[1].points)
     reg.seconds = {**seconds, **reg.seconds}
     return reg, f1, f2

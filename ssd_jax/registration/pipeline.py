@@ -17,7 +17,7 @@ from ssd_jax import inference
 from ssd_jax.data import clean, preprocess
 from ssd_jax.data.clean import check_cloud
 from ssd_jax.registration import bev, features, icp, keypoints as keypoints_lib, matching
-from ssd_jax.registration import prepared, ransac, verification
+from ssd_jax.registration import prepared, ransac, uncertainty as uncertainty_lib, verification
 
 KEYPOINTS = ('auto', 'iss', 'learned', 'random')
 DESCRIPTORS = ('fpfh', 'learned')
@@ -85,6 +85,10 @@ class Registration:
   # from its ground; `verification.verify`) within FIT_DISTANCE of cloud 1. The transform
   # is the best of them.
   verified_fitness: np.ndarray | None = None
+  verified_poses: np.ndarray | None = None   # [k, 4, 4] each candidate after its ICP
+  # What the scans fix of the transform (`assess`): its information matrix and the
+  # directions they leave free.
+  uncertainty: uncertainty_lib.PoseUncertainty | None = None
 
 
 def voxel_size_of(model=None) -> float:
@@ -260,7 +264,20 @@ def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1, poi
   xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[reg.matches[:, 1]].astype(np.float64)
   inliers, stats = _match_stats(xyz1, xyz2, refined[best], inlier_threshold)
   return dataclasses.replace(reg, transform=refined[best], inliers=inliers, seconds=seconds,
-                             verified_fitness=fitness, **stats)
+                             verified_fitness=fitness, verified_poses=refined, **stats)
+
+
+def assess(reg: Registration, points1, points2, origin: np.ndarray | None = None
+           ) -> Registration:
+  """`reg` with its `uncertainty` at its transform (`uncertainty.assess`): points1, points2
+  as for `verify`; `origin` [3]: cloud 1's frame origin in their coordinates (default 0).
+  Uses the verification's candidates where `reg` was verified."""
+  t0 = time.perf_counter()
+  cloud1, cloud2 = prepared.prepare(points1), prepared.prepare(points2)
+  assessed = uncertainty_lib.assess(cloud1.target, cloud2.source.points, reg.transform,
+                                    reg.verified_poses, reg.verified_fitness, origin)
+  return dataclasses.replace(reg, uncertainty=assessed,
+                             seconds={**reg.seconds, 'assess': time.perf_counter() - t0})
 
 
 def local_origin(*clouds: np.ndarray) -> np.ndarray:
@@ -347,16 +364,18 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
     notes.append(f'{e}; registered again with {len(f1.xyz)} / {len(f2.xyz)} farthest-point '
                  'keypoints')
     reg = estimate(f1, f2, seed, estimator=estimator, candidates=k)
+  cloud1, cloud2 = (prepared.PreparedCloud(c) for c in local)
   if verify_candidates > 0:
     stage('verification')
-    reg = verify(reg, f1, f2, local[0], local[1], bev_candidates=bev_candidates)
+    reg = verify(reg, f1, f2, cloud1, cloud2, bev_candidates=bev_candidates)
   reg.notes = notes
-  transform = reg.transform
   if icp:
     stage('ICP')
     t0 = time.perf_counter()
-    transform, reg.icp_fitness = refine_icp(local[0], local[1], transform)
+    reg.transform, reg.icp_fitness = refine_icp(local[0], local[1], reg.transform)
     reg.seconds['icp'] = time.perf_counter() - t0
+  reg = assess(reg, cloud1, cloud2, origin=-offset)
+  transform = reg.transform
   # T in centred coordinates maps p - o to q - o; in the caller's: q = R p + t + o - R o.
   to_local = np.eye(4)
   to_local[:3, 3] = -offset

@@ -12,7 +12,7 @@ import functools
 
 import numpy as np
 
-from ssd_jax.registration import bev, verification
+from ssd_jax.registration import bev, icp, verification
 
 
 class PreparedCloud:
@@ -31,7 +31,7 @@ class PreparedCloud:
     return bev.footprint(self.points)
 
   @functools.cached_property
-  def target(self) -> verification.Target:
+  def target(self) -> icp.Surface:
     return verification.target(self.points)
 
   @functools.cached_property

@@ -1,0 +1,161 @@
+"""How well a registered pose is fixed: the information matrix a pose graph takes, and the
+directions the two scans leave free.
+
+Point-to-plane ICP fixes a pose only along what the surfaces' normals constrain. Two scans
+of a straight corridor, a tunnel or a road between barriers see walls whose normals are
+all across the way: a shift along it leaves every residual unchanged, so RANSAC and ICP
+return whichever shift they start from, with a perfect fitness. Two measures read this
+off the final pose (Gelfand et al., "Geometrically stable sampling for the ICP
+algorithm", 3DIM 2003; Zhang et al., "On degeneracy of optimization-based state
+estimation problems", ICRA 2016):
+
+  * the point-to-plane Hessian: sum over correspondences of J^T J, J = [(q - c) x n, n]
+    (q a cloud-1 point, n its normal, c their centroid), with the rotation part scaled
+    by the correspondences' RMS distance from c so that both parts are in metres, and
+    divided by their count (its eigenvalues sum to about 2). What it leaves of the
+    translation once rotation has done what it can (the Schur complement of the rotation
+    block) is the translation's constraint: a direction whose eigenvalue there is under
+    `MIN_CONSTRAINT` is a shift no surface resists;
+  * the verification's candidates: a distinct pose (`ransac.CANDIDATE_SEPARATION` away)
+    that fits the clouds within `EQUAL_FIT` of the best is another answer the scans
+    cannot tell apart.
+
+`information_matrix` is Open3D's `get_information_matrix_from_point_clouds` (point-to-
+point, (rx, ry, rz, tx, ty, tz) order, target points): what Open3D's pose-graph
+optimisation takes for an edge.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ssd_jax.registration import icp, ransac
+
+# Metres: correspondences within this distance at the final pose (the verification's last
+# ICP distance).
+DISTANCE = 0.5
+# Per-correspondence eigenvalue of the translation's constraint (above) under which its
+# direction counts as free. Two scans of a straight corridor, a tunnel and a highway
+# between barriers leave 0.0027, 0.0017 and 0.0006 along them (the walls' noise); the
+# pairs of the project's sets that register, real and synthetic, no less than 0.016
+# (docs/registration.md: degenerate scenes). The bound sits between, 2-3 times from each.
+MIN_CONSTRAINT = 0.0075
+# A candidate whose fitness is this close to the best's, at least
+# ransac.CANDIDATE_SEPARATION from it, is an equally good answer.
+EQUAL_FIT = 0.01
+# Fewer correspondences than this at the final pose: the pose is fixed by almost nothing.
+MIN_CORRESPONDENCES = 30
+
+
+@dataclasses.dataclass(frozen=True)
+class PoseUncertainty:
+  """What the scans fix of a pose T_12.
+
+  information: [6, 6] Open3D's information matrix (`information_matrix`).
+  eigenvalues: [6] ascending, of the scaled point-to-plane Hessian per correspondence.
+  directions: [6, 6] its unit eigenvectors as rows, (rx, ry, rz, tx, ty, tz): rotation in
+    radians times `scale`, translation in metres.
+  translation_constraint: [3] ascending, the translation's constraint (the Hessian's
+    Schur complement of its rotation block) per correspondence.
+  translation_directions: [3, 3] its unit eigenvectors as rows (x, y, z).
+  scale: metres, the RMS distance of the correspondences from their centroid.
+  correspondences: cloud-2 points with a cloud-1 point within DISTANCE at the pose.
+  equal_candidates: distinct verified candidates fitting within EQUAL_FIT of the best.
+  """
+  information: np.ndarray
+  eigenvalues: np.ndarray
+  directions: np.ndarray
+  translation_constraint: np.ndarray
+  translation_directions: np.ndarray
+  scale: float
+  correspondences: int
+  equal_candidates: int = 0
+
+  @property
+  def free(self) -> str:
+    """'' when the scans fix the pose, else one line naming what they leave free."""
+    if self.correspondences < MIN_CORRESPONDENCES:
+      return (f'only {self.correspondences} points of cloud 2 lie within {DISTANCE:g} m of '
+              'cloud 1 at the pose: the scans barely overlap there')
+    if self.translation_constraint[0] < MIN_CONSTRAINT:
+      return (f'{describe_direction(np.append(np.zeros(3), self.translation_directions[0]))}'
+              ' is not fixed by the scans (a corridor, tunnel or road between barriers?)')
+    if self.equal_candidates:
+      return (f'{self.equal_candidates} other pose(s) at least '
+              f'{ransac.CANDIDATE_SEPARATION[0]:g} m or {ransac.CANDIDATE_SEPARATION[1]:g} '
+              f'degrees away fit the scans as well (within {EQUAL_FIT} of the best fitness)')
+    return ''
+
+  def to_json(self) -> dict:
+    return {'free': self.free, 'information_matrix': self.information.tolist(),
+            'smallest_eigenvalue': float(self.eigenvalues[0]),
+            'smallest_direction': self.directions[0].tolist(),
+            'eigenvalues': self.eigenvalues.tolist(),
+            'translation_constraint': self.translation_constraint.tolist(),
+            'least_fixed_translation': self.translation_directions[0].tolist(),
+            'scale_m': self.scale,
+            'correspondences': self.correspondences,
+            'equal_candidates': self.equal_candidates}
+
+
+def describe_direction(direction: np.ndarray) -> str:
+  """A unit 6-vector (rx, ry, rz, tx, ty, tz) -> 'translation along (0.99, 0.02, 0.00)' or
+  'rotation about (0.00, 0.00, 1.00)', whichever part is larger."""
+  rotation, translation = direction[:3], direction[3:]
+  kind, axis = (('translation along', translation)
+                if np.linalg.norm(translation) >= np.linalg.norm(rotation)
+                else ('rotation about', rotation))
+  axis = axis / np.linalg.norm(axis)
+  axis = axis * np.sign(axis[np.argmax(np.abs(axis))])   # the largest component positive
+  axis = np.round(axis, 2) + 0.0                          # no '-0.00'
+  return f'{kind} ({axis[0]:.2f}, {axis[1]:.2f}, {axis[2]:.2f})'
+
+
+def assess(target: icp.Surface, source: np.ndarray, transform: np.ndarray,
+           candidates: np.ndarray | None = None, fitness: np.ndarray | None = None,
+           origin: np.ndarray | None = None, distance: float = DISTANCE) -> PoseUncertainty:
+  """What cloud 1 (`target`) and cloud 2's points source [M, 3] metres fix of the pose T_12
+  [4, 4], from their correspondences within `distance` at it: Open3D's information
+  matrix (about `origin` [3], cloud 1's frame origin in these coordinates, default 0) and
+  the scaled point-to-plane Hessian's eigen-decomposition; given the verification's
+  candidates [k, 4, 4] (refined) and their fitness [k], how many distinct ones fit as
+  well as the best."""
+  moved = np.asarray(source, np.float64) @ transform[:3, :3].T + transform[:3, 3]
+  found, idx, _ = icp.correspondences(target, moved, distance)
+  idx = idx[found]
+  equal = 0
+  if candidates is not None and len(candidates) > 1:
+    order = ransac.distinct_best(candidates, fitness, len(candidates))
+    equal = sum(1 for c in order[1:] if fitness[c] >= fitness[order[0]] - EQUAL_FIT)
+  q = target.points[idx]
+  information = information_matrix(q if origin is None else q - origin)
+  if len(idx) < MIN_CORRESPONDENCES:
+    return PoseUncertainty(information, np.zeros(6), np.eye(6), np.zeros(3), np.eye(3), 0.0,
+                           len(idx), equal)
+  n = target.normals_at(idx)
+  r = q - q.mean(0)
+  scale = float(np.sqrt(np.mean(np.sum(r * r, 1)))) or 1.0
+  jacobian = np.concatenate([np.cross(r, n) / scale, n], 1)          # [C, 6]
+  hessian = jacobian.T @ jacobian / len(idx)
+  values, vectors = np.linalg.eigh(hessian)
+  # Translation after the best rotation: H_tt - H_tr H_rr^-1 H_rt (pinv: a rotation no
+  # surface resists either leaves the translation as it is).
+  schur = hessian[3:, 3:] - hessian[3:, :3] @ np.linalg.pinv(hessian[:3, :3]) @ hessian[:3, 3:]
+  t_values, t_vectors = np.linalg.eigh((schur + schur.T) / 2)
+  return PoseUncertainty(information, values, vectors.T, t_values, t_vectors.T, scale,
+                         len(idx), equal)
+
+
+def information_matrix(partners: np.ndarray) -> np.ndarray:
+  """The cloud-1 points [C, 3] metres of the correspondences at a pose -> [6, 6] Open3D's
+  `get_information_matrix_from_point_clouds` ((rx, ry, rz, tx, ty, tz) order): the sum of
+  G^T G with G = [[q]_x^T | I] over them, the edge information of Open3D's pose graph."""
+  g = np.zeros((len(partners), 3, 6))
+  x, y, z = partners[:, 0], partners[:, 1], partners[:, 2]
+  g[:, 0, 1], g[:, 0, 2] = z, -y
+  g[:, 1, 0], g[:, 1, 2] = -z, x
+  g[:, 2, 0], g[:, 2, 1] = y, -x
+  g[:, :, 3:] = np.eye(3)
+  return np.einsum('cki,ckj->ij', g, g)
