@@ -17,14 +17,12 @@ Writes WORKDIR/<set>.md (summary, one success matrix per method) and <set>.csv (
 RTE, RRE and inlier ratio per method x unit x distance). docs/cross_sensor.md has the
 protocol and every cell.
 
-Expected (2-core CPU VM, ~70 minutes with every row; the rows `bev`,
-`auto+fpfh+upright+verify+bev` and `auto+ours+upright+verify+bev` alone 34 minutes on the
-AMD EPYC VM, 25 of them Open3D's FPFH features): real re-scans (96 pairs), defaults +
-ours 99.0 %, defaults + FPFH 99.0 %, BEV alone 92.7 %, farthest-point + upright ours
-91.7 %, Open3D's pipeline 38.5 % (its RANSAC is not repeatable: +-1 pair), paper protocol
-ISS + ours 49.0 %, ISS + FPFH 36.5 %; synthetic (120 pairs), defaults + FPFH 94.2 %,
-defaults + ours 94.2 %, BEV alone 93.3 %, farthest-point + upright FPFH 49.2 % / ours
-43.3 %, Open3D 15.8 %.
+Expected (2-core AMD EPYC VM, ~36 minutes with every row: docs/benchmarks.md): real
+re-scans (96 pairs), defaults + ours 99.0 %, defaults + FPFH 97.9 %, BEV alone 92.7 %,
+farthest-point + upright ours 91.7 %, Open3D's pipeline 38.5 % (its RANSAC is not
+repeatable: +-1 pair), paper protocol ISS + ours 49.0 %, ISS + FPFH 36.5 %; synthetic (120
+pairs), defaults + FPFH 94.2 %, defaults + ours 94.2 %, BEV alone 93.3 %, farthest-point +
+upright FPFH 48.3 % / ours 43.3 %, Open3D 15.8 %.
 """
 
 import ml_collections

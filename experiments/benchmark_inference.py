@@ -65,6 +65,8 @@ def main(argv):
        _time(lambda: inference.attention(model, pts, search='kdtree'))),
       (f'attention for all {len(pts):,} points, dense JAX ball query',
        _time(lambda: inference.attention(model, pts, search='dense'))),
+      (f'Open3D FPFH, same {FLAGS.keypoints} keypoints, 4 m, every neighbour (the default)',
+       _time(lambda: features.fpfh(pts, kp_idx))),
       (f'Open3D FPFH, same {FLAGS.keypoints} keypoints, 4 m, neighbour cap 1000',
        _time(lambda: features.fpfh(pts, kp_idx, max_nn=1000))),
       (f'Open3D FPFH, same {FLAGS.keypoints} keypoints, 4 m, neighbour cap 200',

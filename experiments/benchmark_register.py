@@ -8,8 +8,8 @@ success on the same pairs, in one run.
 Methods, each on every pair of each set (`--num_pairs`: the first N, 0 all):
 
   * register: `python -m experiments.register` with its defaults (the shipped `ours`,
-    1,024 farthest-point keypoints, upright RANSAC, its 10 best poses and the BEV
-    search's 5 verified against the clouds). batch: the whole `--pairs` command in a new
+    farthest-point keypoints, 512 then 1,024 where those leave the pose in doubt, upright
+    RANSAC, its 10 best poses and the BEV search's 5 verified against the clouds). batch: the whole `--pairs` command in a new
     process, its wall time per pair (imports, loading the model and reading included)
     and the median of its per-pair seconds (registrations.csv, which also gives each
     stage's seconds); warm: one pair in a process that registered another before (the

@@ -57,7 +57,8 @@ FLAGS = flags.FLAGS
 flags.DEFINE_string('dataset', 'data_cache/synthetic_small/test_kitti', 'Registration set.')
 flags.DEFINE_integer('num_pairs', 100, 'Pairs of the batch regime (the first ones).')
 flags.DEFINE_integer('cold_pairs', 3, 'Pairs timed as one new process each.')
-flags.DEFINE_integer('fpfh_max_nn', features.FPFH_MAX_NN, "The project's FPFH neighbour cap.")
+flags.DEFINE_integer('fpfh_max_nn', features.FPFH_MAX_NN,
+                     "The project's FPFH neighbour cap (0: none).")
 flags.DEFINE_list('draws', [], 'Learned rows: one per value, describing with this many '
                   "samplings of each ball (default: the shipped model's own setting).")
 flags.DEFINE_integer('dense', 0, 'Points per cloud of the dense regime (0: no dense rows), '

@@ -48,7 +48,7 @@ from tqdm import auto as tqdm
 from ssd_jax import cli, geometry, pretrained, viz
 from ssd_jax.data import clean, groundtruth, io
 from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.registration import batch, metrics, pipeline, uncertainty
+from ssd_jax.registration import batch, features, metrics, pipeline, uncertainty
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('cloud1', None, 'Target cloud (its frame is the output frame).')
@@ -82,8 +82,8 @@ flags.DEFINE_integer('draws', None, 'Learned descriptors: average this many rand
                      "of each ball (0: the model's own setting). Default: where the poses are "
                      'verified (--verify > 0), one sampling of 32 points '
                      "(pipeline.verified_model), else the model's own.")
-flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m FPFH search (normals: '
-                     '1 m, 30 neighbours).')
+flags.DEFINE_integer('fpfh_max_nn', features.FPFH_MAX_NN, 'Neighbour cap of the 4 m FPFH '
+                     'search, 0 for none (normals: 1 m, 30 neighbours).')
 flags.DEFINE_float('voxel', None, "Put each cloud on this grid (metres) first; default the "
                    "model's (0.2 m: the shipped models and FPFH), 0 keeps every point.")
 flags.DEFINE_bool('progress', None, 'Show each stage on stderr (default: when stderr is a '
@@ -400,8 +400,8 @@ def main(argv):
       bar.clear()   # redrawn at its next stage, below this descriptor's report
     transform = reg.transform
     out = {'keypoints': FLAGS.keypoints, 'descriptor': descriptor,
-           'num_keypoints': [len(f1.xyz), len(f2.xyz)], 'inliers': int(reg.inliers.sum()),
-           'trials': reg.trials, 'model': checkpoint if descriptor == 'learned' else None,
+           'num_keypoints': [len(f1.xyz), len(f2.xyz)], 'keypoint_levels': reg.levels_tried,
+           'inliers': int(reg.inliers.sum()), 'trials': reg.trials, 'model': checkpoint if descriptor == 'learned' else None,
            'notes': reg.notes, 'fitness': reg.fitness, 'inlier_rmse': reg.inlier_rmse,
            'voxel': voxel, 'points': [len(clouds[0]), len(clouds[1])],
            'correspondence_set_size': reg.correspondence_set_size,

@@ -34,7 +34,7 @@ flags.DEFINE_string('real', os.environ.get('SSD_JAX_SHARED_DATA', '../shared/dat
                     'Real data root with kitti_object_velodyne/ and example/.')
 flags.DEFINE_string('out', None, 'Write the Markdown report here (and JSON beside it).')
 flags.DEFINE_integer('max_pairs', 0, 'Evaluate at most this many pairs per split (0 = all).')
-flags.DEFINE_integer('fpfh_max_nn', 1000, 'Neighbour cap of the 4 m FPFH search (normals: '
+flags.DEFINE_integer('fpfh_max_nn', 0, 'Neighbour cap of the 4 m FPFH search, 0 for none (normals: '
                      '1 m, 30 neighbours).')
 flags.DEFINE_integer('scan_stride', 6, 'Every n-th test scan enters the statistics.')
 flags.DEFINE_integer('model_stride', 1, 'Every n-th Oxford-style test model enters the '

@@ -160,8 +160,20 @@ def _dense_neighbourhoods(points, valid, centers, *, radius, num_samples):
   return grouping.ball_query(points, centers, radius, num_samples, valid)
 
 
+def neighbourhoods(model: Model, points: np.ndarray, keypoints: np.ndarray,
+                   search: str = 'kdtree', seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+  """The clusters `describe` groups at keypoints [K, 3] in points [N, 3] (metres):
+  idx [draws * K, c] point indices (draw-major), has_neighbour [draws * K] bool. They
+  depend on the model's radius, num_samples and draws only, so models that share those
+  share them (`describe(..., clusters=)`)."""
+  points = check_cloud(points)
+  keypoints = check_cloud(keypoints, 'keypoints')
+  return _neighbourhoods(model, points, keypoints, search, _order_seeds(model.draws, seed))
+
+
 def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: str = 'kdtree',
-             chunk: int = 256, seed: int = 0) -> np.ndarray:
+             chunk: int = 256, seed: int = 0,
+             clusters: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
   """Learned descriptors at keypoints.
 
   points [N, 3] metres (the search surface); keypoints [K, 3] metres (cluster
@@ -169,11 +181,13 @@ def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: st
   samplings of each ball). The balls are found once; every draw is a different random
   subset of each, and the clusters of all draws go through the network together, in
   chunks of `chunk` (one compiled shape whatever the cloud's or keypoint set's size).
+  clusters: `neighbourhoods(model, points, keypoints, search, seed)` where already found.
   """
   points = check_cloud(points)
   keypoints = check_cloud(keypoints, 'keypoints')
   order_seeds = _order_seeds(model.draws, seed)
-  idx, has = _neighbourhoods(model, points, keypoints, search, order_seeds)
+  idx, has = (_neighbourhoods(model, points, keypoints, search, order_seeds)
+              if clusters is None else clusters)
   centers = np.tile(keypoints, (len(order_seeds), 1))
   descriptors = _run_groups(model, points[idx], centers, has, chunk, 'describe')
   return _mean_over_draws(descriptors, len(order_seeds))

@@ -108,3 +108,55 @@ def test_verification_sharing_a_memo_repeats_no_icp_and_gives_the_same_result(mo
   np.testing.assert_array_equal(both[1], alone[1])
   np.testing.assert_array_equal(both[2], alone[2])
   assert metrics.registration_errors(t_true, both[1][both[0]])['rte'] < 0.05
+
+
+@pytest.mark.real_data
+@pytest.mark.slow
+def test_coarse_to_fine_ends_at_a_confident_coarse_pose_and_else_registers_as_without_it(
+    tmp_path, monkeypatch):
+  """A pair whose coarse level (the first 512 farthest-point keypoints) gives a confident
+  verified pose ends there, half of each cloud's keypoints described; where no pose is
+  confident enough the full level decides, to exactly the pose of a registration
+  without levels."""
+  paths, truth = _views(tmp_path)
+  model = pipeline.verified_model(pretrained.load('ours'))
+  registrar = batch.Registrar(np.load, model=model, say=lambda line: None)
+  reg, f1, _ = registrar.register(paths['a'], paths['b'])
+  assert reg.levels_tried == 1 and len(f1.xyz) == pipeline.COARSE_KEYPOINTS
+  assert reg.verified_fitness.max() >= verification.CONFIDENT_FITNESS
+  for path in (paths['a'], paths['b']):
+    levels = registrar.cloud(path)[0].features
+    assert len(levels.described()) == pipeline.COARSE_KEYPOINTS < len(levels.idx)
+  assert metrics.registration_errors(truth['b'], reg.transform)['success']
+
+  monkeypatch.setattr(verification, 'CONFIDENT_FITNESS', 1.01)   # never confident
+  fine = batch.Registrar(np.load, model=model, say=lambda line: None)
+  reg_fine, g1, _ = fine.register(paths['a'], paths['b'])
+  assert reg_fine.levels_tried == 2 and len(g1.xyz) == len(fine.cloud(paths['a'])[0].features.idx)
+  entries = [fine.cloud(p)[0] for p in (paths['a'], paths['b'])]
+  one_level, _, _ = pipeline.coarse_to_fine(
+      entries[0].features.levels[-1:], entries[1].features.levels[-1:], entries[0].points,
+      entries[1].points, candidates=10, bev_candidates=5)
+  np.testing.assert_array_equal(reg_fine.transform, one_level.transform)
+  assert metrics.registration_errors(truth['b'], reg_fine.transform)['success']
+
+
+@pytest.mark.real_data
+def test_verification_for_a_confident_pose_only_refines_none_far_from_confidence(tmp_path):
+  """Where only a confident pose is of use, candidates that fit far below it after the
+  coarse ICP are not refined in full; a right one is, as without the option."""
+  paths, truth = _views(tmp_path)
+  target, source = verification.target(np.load(paths['a'])), verification.source(np.load(paths['b']))
+  wrong = truth['b'] @ geometry.make_transform(geometry.rotation_z(np.radians(90.0)),
+                                               np.array([15.0, 0.0, 0.0]))
+  memo = {}
+  _, _, fit = verification.verify(target, source, wrong[None], memo=memo, confident_only=True)
+  assert fit[0] < verification.CONFIDENT_FITNESS - verification.UNREFINED_MARGIN
+  assert not any(kind == 'fine' for kind, _ in memo)
+  near = truth['b'] @ geometry.make_transform(geometry.rotation_z(np.radians(2.0)),
+                                              np.array([0.4, 0.0, 0.0]))
+  best, refined, fit = verification.verify(target, source, np.stack([wrong, near]),
+                                           confident_only=True)
+  alone = verification.verify(target, source, np.stack([wrong, near]))
+  assert best == 1 and fit[1] >= verification.CONFIDENT_FITNESS
+  np.testing.assert_array_equal(refined[1], alone[1][1])

@@ -16,10 +16,11 @@ from ssd_jax import errors, geometry, inference, pretrained, train
 from ssd_jax.configs import cpu_small
 from ssd_jax.configs import registration as registration_config
 from ssd_jax.data import clusters, io, registration_sets
+from ssd_jax.registration import bev, features, pipeline, verification
 from ssd_jax.evaluation import (descriptor_matching, evaluators, feature_store, fingerprint,
                                 learning_curve, orientation, precision, registration,
                                 repeatability)
-from tests.conftest import tiny_config_dict
+from tests.conftest import shared_path, tiny_config_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -409,3 +410,43 @@ def test_evaluate_reports_user_errors_in_one_line_and_keeps_a_bugs_traceback(
   else:
     with pytest.raises(ValueError, match='could not be broadcast'):
       evaluate.main(['evaluate'])
+
+
+@pytest.mark.real_data
+@pytest.mark.slow
+def test_feature_store_shares_work_between_rows_and_changes_no_result(tmp_path, monkeypatch):
+  """FPFH of two keypoint sets described together, learned clusters shared by models of
+  one setting, and a pair's BEV search and ICPs shared by the rows that register it:
+  each equals what the row computes alone."""
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
+  scan = scan[np.linalg.norm(scan[:, :2], axis=1) < 30]
+  scan, _ = pipeline.to_grid(scan, 0.2)   # as every test set: FPFH over the cloud itself
+  turn = geometry.make_transform(geometry.rotation_z(np.radians(30.0)), np.array([2.0, 1.0, 0.0]))
+  paths = [str(tmp_path / 'a.npy'), str(tmp_path / 'b.npy')]
+  np.save(paths[0], scan.astype(np.float32))
+  np.save(paths[1], ((scan - turn[:3, 3]) @ turn[:3, :3]).astype(np.float32))
+  model = pretrained.load('ours')
+  store = feature_store.FeatureStore({'ours': model, 'twin': dataclasses.replace(model)})
+  store.describe_fpfh_together(['iss+fpfh', 'auto+fpfh+upright'])
+  points = store.cloud(paths[0])
+  for kp in ('iss', 'auto'):
+    np.testing.assert_array_equal(store.features(paths[0], f'{kp}+fpfh').descriptors,
+                                  features.fpfh(points, store.keypoints(paths[0], kp)))
+  ours, twin = (store.features(paths[0], f'iss+{m}').descriptors for m in ('ours', 'twin'))
+  np.testing.assert_array_equal(ours, inference.describe(
+      model, points, points[store.keypoints(paths[0], 'iss')]))
+  np.testing.assert_array_equal(ours, twin)
+  assert len(store._clusters) == 1   # the twin's clusters were the first model's
+
+  searches = []
+  search = bev.search
+  monkeypatch.setattr(bev, 'search', lambda *a, **k: searches.append(1) or search(*a, **k))
+  pair = registration_sets.RegistrationPair('x', 0, 1, paths[0], paths[1], turn)
+  rows = ['auto+fpfh+upright+verify+bev', 'auto+ours+upright+verify+bev']
+  monkeypatch.setattr(verification, 'CONFIDENT_FITNESS', 1.01)  # BEV every time
+  shared = registration.register_pairs([pair], rows, store, progress=False)
+  assert len(searches) == 1
+  for row in rows:
+    alone = registration.register_pairs([pair], [row], feature_store.FeatureStore(
+        {'ours': model}), progress=False)[row][0]
+    assert alone == shared[row][0] and alone['success']

@@ -221,6 +221,28 @@ def test_open3d_reference_pipeline_registers_a_pair_and_refuses_a_flat_one(synth
     reference.open3d_register(flat, flat)
 
 
+def test_farthest_point_order_is_the_sampling_of_every_prefix():
+  """The first j picks of the order are the j-point sampling (the coarse level of the
+  register defaults is the 512-point one), and sorted they are the keypoints."""
+  pts = np.random.default_rng(0).uniform(-20, 20, (3000, 3))
+  order = keypoints.farthest_point_order(pts, 300)
+  assert len(np.unique(order)) == 300
+  for j in (1, 50, 150, 300):
+    np.testing.assert_array_equal(np.sort(order[:j]), keypoints.farthest_point_keypoints(pts, j))
+  idx, coarse = pipeline.auto_keypoints(pts, 300, coarse=100)
+  np.testing.assert_array_equal(idx[coarse], np.sort(order[:100]))
+
+
+def test_fpfh_takes_every_neighbour_within_its_radius_unless_capped():
+  """The default (max_nn 0) is the radius search: equal to a cap no neighbourhood
+  reaches, and other than a cap some neighbourhoods exceed."""
+  pts = np.random.default_rng(0).uniform(-6, 6, (3000, 3)) * [1, 1, 0.3]
+  kp = np.arange(0, 3000, 300)
+  radius_only = features.fpfh(pts, kp)
+  np.testing.assert_allclose(radius_only, features.fpfh(pts, kp, max_nn=3000), atol=1e-4)
+  assert np.abs(radius_only - features.fpfh(pts, kp, max_nn=50)).max() > 1.0
+
+
 def test_farthest_point_keypoints_are_spread_and_deterministic():
   pts = np.random.default_rng(0).uniform(-20, 20, (3000, 3))
   idx = keypoints.farthest_point_keypoints(pts, 200)

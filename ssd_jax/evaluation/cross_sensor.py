@@ -21,7 +21,7 @@ from tqdm import auto as tqdm
 
 from ssd_jax import distributed, errors
 from ssd_jax.evaluation import feature_store, registration, tables
-from ssd_jax.registration import bev, metrics, reference, verification
+from ssd_jax.registration import metrics, reference, verification
 
 # Rows that register whole clouds, without the project's keypoints and descriptors:
 # Open3D's own pipeline (the outside reference), and the bird's-eye-view search alone,
@@ -44,10 +44,10 @@ def _register_clouds(row: str, store: feature_store.FeatureStore, pair, seed: in
     t, _, stats = reference.open3d_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2),
                                             seed, 'paper')
     return t, stats
-  cloud1, cloud2 = store.prepared(pair.cloud1), store.prepared(pair.cloud2)
-  candidates = bev.search(cloud1.footprint, cloud2.footprint,
-                          feature_store.BEV_CANDIDATES).transforms
-  best, refined, _ = verification.verify(cloud1.target, cloud2.source, candidates)
+  prepared = store.pair(pair.cloud1, pair.cloud2)   # shared with the verified rows
+  best, refined, _ = verification.verify(prepared.cloud1.target, prepared.cloud2.source,
+                                         prepared.bev_poses(feature_store.BEV_CANDIDATES),
+                                         memo=prepared.memo)
   return refined[best], {'inliers': 0, 'matches': 0}
 
 

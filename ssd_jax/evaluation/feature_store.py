@@ -17,7 +17,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ssd_jax import errors, pretrained
+from ssd_jax import errors, inference, pretrained
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
 from ssd_jax.registration import batch, features as features_lib, pipeline
@@ -40,6 +40,10 @@ DETECTORS = {
     'ours_run': _UNTRAINED_ATTENTION,
 }
 
+
+# Clouds x keypoint sets whose learned-descriptor clusters are kept: a pair's rows describe
+# its two clouds' ISS and farthest-point keypoints with each model in turn.
+CLUSTERS_KEPT = 8
 
 # A row's part 'verify': RANSAC's distinct best poses checked against the clouds
 # (`pipeline.verify`), this many; its part 'bev' (after 'verify'): the bird's-eye-view
@@ -147,8 +151,15 @@ class FeatureStore:
     self.models = dict(models)
     self.seed = seed
     self.fpfh_max_nn = fpfh_max_nn
+    self.fpfh_keypoints: tuple[str, ...] = ()
+    self._fpfh = {}   # (path, sources) -> ({point index: row}, FPFH [M, 33]) of their keypoints
     self.seconds = collections.defaultdict(float)
     self._clouds, self._keypoints, self._descriptors = {}, {}, {}
+    self._coarse = {}   # path -> positions of the coarse level in its 'auto' keypoints
+    self._pair_memos = {}   # (path 1, path 2) -> `prepared.PreparedPair.memo`
+    # The last few clouds' learned-descriptor clusters, which every model of one radius,
+    # cluster size and draw count shares (`inference.neighbourhoods`): ~2 MB a cloud.
+    self._clusters = collections.OrderedDict()
     self._prepared = collections.OrderedDict()
 
   def cloud(self, path: str | os.PathLike) -> np.ndarray:
@@ -170,13 +181,31 @@ class FeatureStore:
         self._prepared.popitem(last=False)
     return self._prepared[key]
 
+  def describe_fpfh_together(self, rows: Sequence[str]) -> None:
+    """From now on, describe with FPFH the built-in keypoint sets of `rows` (the rows an
+    evaluation runs on each of its clouds) together: FPFH at a point depends on the
+    cloud only, and the neighbours' histograms of several keypoint sets are mostly the
+    same points' (ISS and farthest-point keypoints together cost ~55 % of the two
+    apart)."""
+    self.fpfh_keypoints = tuple(sorted({kp for kp, desc in map(split_row, rows)
+                                        if desc == 'fpfh' and kp in BUILTIN_KEYPOINTS}))
+
+  def pair(self, path1: str | os.PathLike, path2: str | os.PathLike
+           ) -> prepared_lib.PreparedPair:
+    """Cloud 1 and cloud 2 of a pair (`prepared`), with what every row that registers the
+    pair shares: the BEV search's poses and each verification ICP, kept for every pair."""
+    memo = self._pair_memos.setdefault((str(path1), str(path2)), {})
+    return prepared_lib.PreparedPair(self.prepared(path1), self.prepared(path2), memo)
+
   def keypoints(self, path: str | os.PathLike, source: str) -> np.ndarray:
     """Keypoint indices [K] into `cloud(path)`."""
     key = (str(path), source)
     if key not in self._keypoints:
       points = self.cloud(path)
       t0 = time.perf_counter()
-      if source in BUILTIN_KEYPOINTS:
+      if source == 'auto':
+        idx, self._coarse[str(path)] = pipeline.auto_keypoints(points)
+      elif source in BUILTIN_KEYPOINTS:
         # The protocol: a detector that finds too few keypoints fails the pair.
         idx, _ = pipeline.compute_keypoints(points, source, seed=self.seed, fallback=False)
       else:
@@ -185,10 +214,13 @@ class FeatureStore:
       self._keypoints[key] = idx
     return self._keypoints[key]
 
-  def features(self, path: str | os.PathLike, row: str) -> pipeline.CloudFeatures:
-    """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud. A learned descriptor
-    of a row that verifies its poses describes as the register command's defaults do
-    (`pipeline.verified_model`: VERIFIED_DRAWS samplings of VERIFIED_SAMPLES points)."""
+  def levels(self, path: str | os.PathLike, row: str) -> list:
+    """The feature levels a row registers `path` with (`pipeline.coarse_to_fine`): for a
+    row that verifies its poses with farthest-point keypoints, as the register command's
+    defaults do, the coarse level, then all; else all. A learned descriptor of a row
+    that verifies describes as those defaults do (`pipeline.verified_model`:
+    VERIFIED_DRAWS samplings of VERIFIED_SAMPLES points). Each descriptor is computed
+    once, when a level first needs it."""
     kp, desc = split_row(row)
     verified = row_verifies(row) and desc not in BUILTIN_DESCRIPTORS
     name = (f'{desc}@draws={pipeline.VERIFIED_DRAWS},c={pipeline.VERIFIED_SAMPLES}'
@@ -196,17 +228,62 @@ class FeatureStore:
     key = (str(path), kp, name)
     if key not in self._descriptors:
       points, idx = self.cloud(path), self.keypoints(path, kp)
-      t0 = time.perf_counter()
-      if desc in BUILTIN_DESCRIPTORS:
-        d = pipeline.compute_descriptors(points, idx, desc, fpfh_max_nn=self.fpfh_max_nn)
+      if desc in BUILTIN_DESCRIPTORS and len(self.fpfh_keypoints) > 1 and kp in self.fpfh_keypoints:
+        describe = lambda at, sources=self.fpfh_keypoints: self._fpfh_together(path, sources, at)
+      elif desc in BUILTIN_DESCRIPTORS:
+        describe = lambda at: pipeline.compute_descriptors(points, at, desc,
+                                                           fpfh_max_nn=self.fpfh_max_nn)
       else:
-        model = self._model(desc)
-        d = pipeline.compute_descriptors(points, idx, 'learned',
-                                         pipeline.verified_model(model) if verified else model)
-      self.seconds[f'descriptors:{name}'] += time.perf_counter() - t0
-      self._descriptors[key] = d
-    return pipeline.CloudFeatures(self.cloud(path)[self.keypoints(path, kp)],
-                                  self._descriptors[key], {})
+        model = pipeline.verified_model(self._model(desc)) if verified else self._model(desc)
+        describe = lambda at, model=model: inference.describe(
+            model, points, points[at], clusters=self._clusters_of(path, model, at))
+
+      def timed(at, describe=describe, stage=f'descriptors:{name}'):
+        t0 = time.perf_counter()
+        d = describe(at)
+        self.seconds[stage] += time.perf_counter() - t0
+        return d
+
+      coarse = self._coarse.get(str(path)) if kp == 'auto' else None
+      self._descriptors[key] = pipeline.FeatureLevels(
+          points, [idx] if coarse is None else [idx[coarse], idx], timed)
+    levels = self._descriptors[key]
+    return levels.levels if row_verifies(row) else levels.levels[-1:]
+
+  def _fpfh_together(self, path: str | os.PathLike, sources: tuple[str, ...],
+                     at: np.ndarray) -> np.ndarray:
+    """FPFH [len(at), 33] at cloud(path)[at], computed with every keypoint set of
+    `sources` of the cloud the first time (alone on a cloud described on the search grid,
+    `features.searched_on_grid`)."""
+    key = (str(path), sources)
+    if features_lib.searched_on_grid(self.cloud(path)):   # FPFH there depends on the set
+      return pipeline.compute_descriptors(self.cloud(path), at, 'fpfh',
+                                          fpfh_max_nn=self.fpfh_max_nn)
+    if key not in self._fpfh:
+      together = np.unique(np.concatenate([self.keypoints(path, s) for s in sources]))
+      d = pipeline.compute_descriptors(self.cloud(path), together, 'fpfh',
+                                       fpfh_max_nn=self.fpfh_max_nn)
+      self._fpfh[key] = ({int(i): n for n, i in enumerate(together)}, d)
+    rows, d = self._fpfh[key]
+    return d[[rows[int(i)] for i in at]]
+
+  def _clusters_of(self, path: str | os.PathLike, model, at: np.ndarray):
+    """`inference.neighbourhoods` of `model` at cloud(path)[at], kept for the last
+    CLUSTERS_KEPT (cloud, keypoints, setting)s."""
+    key = (str(path), model.radius, model.num_samples, model.draws, np.asarray(at).tobytes())
+    if key in self._clusters:
+      self._clusters.move_to_end(key)
+    else:
+      points = self.cloud(path)
+      self._clusters[key] = inference.neighbourhoods(model, points, points[at])
+      if len(self._clusters) > CLUSTERS_KEPT:
+        self._clusters.popitem(last=False)
+    return self._clusters[key]
+
+  def features(self, path: str | os.PathLike, row: str) -> pipeline.CloudFeatures:
+    """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud: all of its
+    keypoints (`levels`)."""
+    return self.levels(path, row)[-1]()
 
   def file_digests(self) -> dict[str, dict[str, str]]:
     """{stage: {file: digest}} of what this store computed: the clouds as read, the
@@ -215,8 +292,9 @@ class FeatureStore:
     out = {'clouds (as read)': {k: fingerprint.digest([v]) for k, v in self._clouds.items()}}
     for (path, source), idx in self._keypoints.items():
       out.setdefault(f'keypoints: {source}', {})[path] = fingerprint.digest([idx])
-    for (path, kp, desc), d in self._descriptors.items():
-      out.setdefault(f'descriptors: {kp}+{desc}', {})[path] = fingerprint.digest([d])
+    for (path, kp, desc), levels in self._descriptors.items():
+      out.setdefault(f'descriptors: {kp}+{desc}', {})[path] = fingerprint.digest(
+          [levels.described()])
     return out
 
   def fingerprints(self, file_digests: Mapping[str, Mapping[str, str]] | None = None,

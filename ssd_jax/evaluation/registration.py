@@ -43,24 +43,24 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   all results; the log is written when they are gathered.
   """
   one_process = jax.process_count() == 1
+  store.describe_fpfh_together(rows)
 
   def register(n: int, pair) -> list[dict]:
     out = []
     for row in rows:
       res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
       try:
-        f1, f2 = store.features(pair.cloud1, row), store.features(pair.cloud2, row)
         verify = feature_store.row_verifies(row)
-        reg = pipeline.estimate(f1, f2, seed=seed * 1_000_003 + n,
-                                inlier_threshold=inlier_threshold, confidence=confidence,
-                                max_trials=max_trials,
-                                estimator=feature_store.row_estimator(row),
-                                candidates=feature_store.VERIFY_CANDIDATES if verify else 1)
-        if verify:   # as the register command: verified, then refused if degenerate
-          prepared1, prepared2 = store.prepared(pair.cloud1), store.prepared(pair.cloud2)
-          reg = pipeline.verify(reg, f1, f2, prepared1, prepared2, inlier_threshold,
-                                feature_store.row_bev_candidates(row))
-          reg = pipeline.assess(reg, prepared1, prepared2)
+        prepared = store.pair(pair.cloud1, pair.cloud2)
+        reg, _, _ = pipeline.coarse_to_fine(
+            store.levels(pair.cloud1, row), store.levels(pair.cloud2, row), prepared,
+            seed=seed * 1_000_003 + n, inlier_threshold=inlier_threshold,
+            confidence=confidence, max_trials=max_trials,
+            estimator=feature_store.row_estimator(row),
+            candidates=feature_store.VERIFY_CANDIDATES if verify else 1,
+            bev_candidates=feature_store.row_bev_candidates(row), verified=verify)
+        if verify:   # as the register command: refused if degenerate
+          reg = pipeline.assess(reg, prepared)
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named
       except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,
@@ -69,6 +69,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
                    rre_geodesic=float('inf'), success=False, error=str(e))
       else:
         res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
+                   levels=reg.levels_tried,
                    **metrics.registration_errors(pair.transform, reg.transform))
         if reg.uncertainty is not None and reg.uncertainty.free:   # no pose for the user
           res.update(success=False, refused=reg.uncertainty.free)

@@ -30,8 +30,8 @@ STAGES = ('read', 'grid', 'keypoints', 'descriptors', 'matching', 'ransac', 'bev
 @dataclasses.dataclass
 class _Cloud:
   points: prepared.PreparedCloud       # on the grid, float64, the file's coordinates
-  features: pipeline.CloudFeatures
-  seconds: dict                        # read / grid / keypoints / descriptors, once
+  features: pipeline.FeatureLevels     # keypoints and descriptors as the pairs need them
+  seconds: dict                        # read / grid, once
 
 
 class Registrar:
@@ -72,13 +72,12 @@ class Registrar:
     t2 = time.perf_counter()
     if note:
       self._say(f'voxel: {os.path.basename(path)}: {note}')
-    f = pipeline.features_anywhere(points, self.keypoints, self.descriptor, self.model,
-                                   self.seed, self.fpfh_max_nn, voxel=0)
+    f = pipeline.feature_levels(points, self.keypoints, self.descriptor, self.model,
+                                self.seed, self.fpfh_max_nn,
+                                pipeline.COARSE_KEYPOINTS if self.verify > 0 else 0)
     if f.note:
       self._say(f'{os.path.basename(path)}: {f.note}')
-    entry = _Cloud(prepared.PreparedCloud(points), f,
-                   {'read': t1 - t0, 'grid': t2 - t1, 'keypoints': f.seconds['keypoints'],
-                    'descriptors': f.seconds['descriptors']})
+    entry = _Cloud(prepared.PreparedCloud(points), f, {'read': t1 - t0, 'grid': t2 - t1})
     self._cache[path] = entry
     if len(self._cache) > self._cache_size:
       self._cache.popitem(last=False)
@@ -87,9 +86,10 @@ class Registrar:
   def register(self, path1: str, path2: str
                ) -> tuple[pipeline.Registration, pipeline.CloudFeatures, pipeline.CloudFeatures]:
     """T_12 of the pair (maps cloud 2 into cloud 1) -> (registration, features of cloud 1,
-    of cloud 2). `registration.seconds` holds every stage this pair cost: reading,
-    gridding, keypoints and descriptors of a cloud met for the first time, matching,
-    RANSAC, the BEV search, the verification and the pose's assessment
+    of cloud 2). `registration.seconds` holds every stage this pair cost: reading and
+    gridding a cloud met for the first time, the keypoints and descriptors it made (each
+    once: a cloud's coarse level first, the rest when a pair needs them,
+    `pipeline.coarse_to_fine`), matching, RANSAC, the BEV search, the verification and the pose's assessment
     (`registration.uncertainty`). A cloud that cannot be registered (too
     few points, flat) is a ValueError; a bad file the reader's error."""
     seconds = collections.defaultdict(float)
@@ -100,23 +100,29 @@ class Registrar:
         for stage, s in entry.seconds.items():
           seconds[stage] += s
       entries.append(entry)
-    f1, f2 = entries[0].features, entries[1].features
-    k = max(self.verify, 1)
+    levels = [e.features for e in entries]
+    lazy = ('keypoints', 'descriptors')   # what the clouds' levels have cost until now
+    before = {stage: sum(f.seconds[stage] for f in levels) for stage in lazy}
+    register = lambda levels1, levels2: pipeline.coarse_to_fine(
+        levels1, levels2, entries[0].points, entries[1].points, seed=self.seed,
+        estimator=self.estimator, candidates=max(self.verify, 1), bev_candidates=self.bev,
+        verified=self.verify > 0)
     try:
-      reg = pipeline.estimate(f1, f2, self.seed, estimator=self.estimator, candidates=k)
+      reg, f1, f2 = register(entries[0].features.levels, entries[1].features.levels)
     except ValueError as e:
       if self.keypoints != 'iss':
         raise
       # As pipeline.register: keypoints spread over both clouds, this pair only.
-      f1, f2 = (pipeline.features_anywhere(e_.points.points, 'auto', self.descriptor,
-                                           self.model, self.seed, self.fpfh_max_nn, voxel=0)
-                for e_ in entries)
+      fallback = [pipeline.feature_levels(e_.points.points, 'auto', self.descriptor,
+                                          self.model, self.seed, self.fpfh_max_nn,
+                                          pipeline.COARSE_KEYPOINTS if self.verify > 0 else 0)
+                  for e_ in entries]
       self._say(f'{os.path.basename(path1)} / {os.path.basename(path2)}: {e}; '
                 'registered again with farthest-point keypoints')
-      reg = pipeline.estimate(f1, f2, self.seed, estimator=self.estimator, candidates=k)
-    if self.verify > 0:
-      reg = pipeline.verify(reg, f1, f2, entries[0].points, entries[1].points,
-                            bev_candidates=self.bev)
+      reg, f1, f2 = register(fallback[0].levels, fallback[1].levels)
+      levels += fallback
+    for stage in lazy:
+      seconds[stage] = sum(f.seconds[stage] for f in levels) - before[stage]
     reg = pipeline.assess(reg, entries[0].points, entries[1].points)
     reg.seconds = {**seconds, **reg.seconds}
     return reg, f1, f2

@@ -8,7 +8,9 @@ estimate per pair.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
+from typing import Callable, Sequence
 
 import numpy as np
 from scipy import spatial
@@ -56,6 +58,16 @@ def verified_model(model):
                              num_samples=min(model.num_samples, VERIFIED_SAMPLES))
 
 
+# Coarse to fine (farthest-point keypoints with verification, the register defaults): the
+# pose is first sought from the first COARSE_KEYPOINTS farthest-point keypoints of each
+# cloud (the same even spread, half as dense), and a verified pose that is confident and
+# clearly the best (`verification.clearly_confident`) is taken there; any other pair is
+# registered from all the keypoints, exactly as without this step (`coarse_to_fine`).
+# Half the keypoints is half the network's work and a quarter of the matching's
+# (docs/registration.md).
+COARSE_KEYPOINTS = 512
+
+
 @dataclasses.dataclass
 class CloudFeatures:
   """Keypoints of one cloud and their descriptors."""
@@ -64,6 +76,72 @@ class CloudFeatures:
   seconds: dict
   note: str = ''           # the keypoint fallback used, if any (one line)
   grid: str = ''           # what `to_grid` did (one line), if it ran
+
+
+class FeatureLevels:
+  """One cloud's keypoints, made and described as they are needed, coarse to fine.
+
+  points [N, 3] metres (the search surface, near the origin); levels: per level, its
+  sorted keypoint indices into points, or a callable that makes them on first use
+  (timed as 'keypoints'); describe(idx [k]) -> descriptors [k, D] at points[idx];
+  offset [3] added to the keypoints' coordinates (the cloud's frame, `local_origin`).
+  `levels` lists the callables `coarse_to_fine` takes, coarse first. Each point's
+  descriptor is computed once, and `seconds['descriptors']` sums the time spent on
+  them. A keypoint's descriptor does not depend on the others described with it
+  (learned; FPFH but on a cloud it describes over its search grid,
+  `features.searched_on_grid`, which the 0.2 m grid of the register command's defaults
+  never is), so each level's descriptors are those of its keypoints described at once.
+  """
+
+  def __init__(self, points: np.ndarray, levels: Sequence,
+               describe: Callable[[np.ndarray], np.ndarray],
+               offset: np.ndarray | None = None, note: str = '', grid: str = '',
+               seconds: dict | None = None):
+    self._points, self._levels, self._describe = points, list(levels), describe
+    self._offset = np.zeros(3) if offset is None else np.asarray(offset, np.float64)
+    self.note, self.grid = note, grid
+    self.seconds = {'keypoints': 0.0, 'descriptors': 0.0, **(seconds or {})}
+    # The points described so far (sorted indices [k]) and their descriptors [k, D].
+    self._known = np.zeros(0, np.int64)
+    self._descriptors: np.ndarray | None = None
+
+  def keypoints(self, level: int = -1) -> np.ndarray:
+    """Sorted keypoint indices [K] of a level (default the finest)."""
+    if callable(self._levels[level]):
+      t0 = time.perf_counter()
+      self._levels[level] = np.asarray(self._levels[level](), np.int64)
+      self.seconds['keypoints'] += time.perf_counter() - t0
+    return self._levels[level]
+
+  @property
+  def idx(self) -> np.ndarray:
+    """The finest level's keypoint indices."""
+    return self.keypoints(-1)
+
+  def level(self, n: int) -> CloudFeatures:
+    """Level n's keypoints [K, 3] (in the cloud's frame) and their descriptors."""
+    idx = self.keypoints(n)
+    need = np.setdiff1d(idx, self._known)
+    if len(need):
+      t0 = time.perf_counter()
+      d = self._describe(need)
+      known = np.concatenate([self._known, need])
+      order = np.argsort(known, kind='stable')
+      self._known = known[order]
+      self._descriptors = (d if self._descriptors is None
+                           else np.concatenate([self._descriptors, d]))[order]
+      self.seconds['descriptors'] += time.perf_counter() - t0
+    xyz = np.asarray(self._points)[idx].astype(np.float64) + self._offset
+    rows = np.searchsorted(self._known, idx)
+    return CloudFeatures(xyz, self._descriptors[rows], self.seconds, self.note, self.grid)
+
+  @property
+  def levels(self) -> list[Callable[[], CloudFeatures]]:
+    return [functools.partial(self.level, n) for n in range(len(self._levels))]
+
+  def described(self) -> np.ndarray:
+    """[k, D] the descriptors computed so far, in point order."""
+    return np.zeros((0, 0), np.float32) if self._descriptors is None else self._descriptors
 
 
 @dataclasses.dataclass
@@ -89,6 +167,7 @@ class Registration:
   # What the scans fix of the transform (`assess`): its information matrix and the
   # directions they leave free.
   uncertainty: uncertainty_lib.PoseUncertainty | None = None
+  levels_tried: int = 1   # `coarse_to_fine`: keypoint levels it took (2: the coarse did not do)
 
 
 def voxel_size_of(model=None) -> float:
@@ -190,6 +269,46 @@ def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str =
                        {'grid': t1 - t0, 'keypoints': t2 - t1, 'descriptors': t3 - t2}, note, grid)
 
 
+def auto_keypoints(points: np.ndarray, num: int = keypoints_lib.FARTHEST_POINT_KEYPOINTS,
+                   coarse: int = COARSE_KEYPOINTS) -> tuple[np.ndarray, np.ndarray]:
+  """`compute_keypoints(points, 'auto')` and its coarse level: (sorted indices [K] into
+  points [N, 3], positions in them of the first `coarse` farthest-point picks)."""
+  points = check_cloud(points)
+  keypoints_lib.check_registrable(points, 'auto keypoints')
+  order = keypoints_lib.farthest_point_order(points, num)
+  idx = np.unique(order)
+  return idx, np.searchsorted(idx, np.unique(order[:coarse]))
+
+
+def feature_levels(points: np.ndarray, keypoints: str = 'auto', descriptor: str = 'learned',
+                   model=None, seed: int = 0, fpfh_max_nn: int = features.FPFH_MAX_NN,
+                   coarse: int = COARSE_KEYPOINTS) -> FeatureLevels:
+  """The `FeatureLevels` of one cloud [N, 3] (on its grid already, any coordinates: as
+  `features_anywhere`): with 'auto' keypoints and `coarse` > 0 two levels, the first
+  `coarse` farthest-point picks, then all `keypoints.FARTHEST_POINT_KEYPOINTS` (the
+  sampling continued only where a pair needs them), else one. Nothing is described yet."""
+  points = check_cloud(points, dtype=np.float64)
+  offset = local_origin(points)
+  local = check_cloud(points - offset)
+  t0 = time.perf_counter()
+  note = ''
+  if keypoints == 'auto' and coarse > 0:
+    keypoints_lib.check_registrable(local, 'auto keypoints')
+    sampler = keypoints_lib.FarthestPointSampler(local)
+    levels = [lambda: np.unique(sampler.order(coarse)),
+              lambda: np.unique(sampler.order(keypoints_lib.FARTHEST_POINT_KEYPOINTS))]
+  else:
+    idx, note = compute_keypoints(local, keypoints, model, seed)
+    if len(idx) < 3:
+      raise ValueError(f'{keypoints} keypoints: found {len(idx)} in a cloud of {len(local)} '
+                       'points, 3 are needed (too sparse, or planar / collinear?)')
+    levels = [idx]
+  describe = lambda at: compute_descriptors(local, at, descriptor, model,
+                                            fpfh_max_nn=fpfh_max_nn)
+  return FeatureLevels(local, levels, describe, offset, note,
+                       seconds={'keypoints': time.perf_counter() - t0})
+
+
 def _match_stats(xyz1: np.ndarray, xyz2: np.ndarray, transform: np.ndarray,
                  inlier_threshold: float) -> tuple[np.ndarray, dict]:
   """Over matches xyz1[i] <-> xyz2[i] under T_12: (which are within the threshold [C],
@@ -231,34 +350,38 @@ def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_thresho
                       **_match_stats(xyz1, xyz2, res.transform, inlier_threshold)[1])
 
 
-def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1, points2,
-           inlier_threshold: float = 1.0, bev_candidates: int = 0) -> Registration:
+def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1, points2=None,
+           inlier_threshold: float = 1.0, bev_candidates: int = 0,
+           confident_only: bool = False) -> Registration:
   """`reg` with the candidate pose (`estimate(candidates=k)`) that, refined by ICP, lays the
   most of cloud 2's structure on cloud 1 (`verification.verify`). points1, points2: the
   clouds [N, 3] (metres near the origin, in the features' coordinates) or their
-  `prepared.PreparedCloud`s, which keep what is made of a cloud for its next pair. With
-  `bev_candidates` b > 0 (upright scans), unless RANSAC's best already lays
-  `verification.CONFIDENT_FITNESS` of cloud 2's structure on cloud 1, the b best poses of
-  the bird's-eye-view search (`bev.search`) are checked too, after RANSAC's, all together.
-  Inliers and the RegistrationResult numbers are recounted over the matches under the
-  chosen pose; `verified_fitness` has one entry per candidate checked (k, or k + b);
-  `seconds` gains 'bev' (0 where it was not needed) and 'verify'."""
+  `prepared.PreparedCloud`s, which keep what is made of a cloud for its next pair; or
+  points1 a `prepared.PreparedPair` (points2 None), which also keeps the BEV search's
+  poses and every ICP for the pair's next registration. With `bev_candidates` b > 0
+  (upright scans), unless RANSAC's best already lays `verification.CONFIDENT_FITNESS` of
+  cloud 2's structure on cloud 1, the b best poses of the bird's-eye-view search
+  (`bev.search`) are checked too, after RANSAC's, all together. Inliers and the
+  RegistrationResult numbers are recounted over the matches under the chosen pose;
+  `verified_fitness` has one entry per candidate checked (k, or k + b); `seconds` gains
+  'bev' (0 where it was not needed) and 'verify'. `confident_only`: only a pose fitting
+  CONFIDENT_FITNESS is of use (no BEV search then): candidates far from it are not
+  refined in full (`verification.verify`)."""
   t0 = time.perf_counter()
-  cloud1, cloud2 = prepared.prepare(points1), prepared.prepare(points2)
+  pair = prepared.prepare_pair(points1, points2)
+  target, source = pair.cloud1.target, pair.cloud2.source
   candidates = reg.candidates if reg.candidates is not None else reg.transform[None]
-  memo = {}   # the second call below repeats no ICP of the first
-  best, refined, fitness = verification.verify(cloud1.target, cloud2.source, candidates,
-                                               memo=memo)
+  best, refined, fitness = verification.verify(target, source, candidates, memo=pair.memo,
+                                               confident_only=confident_only)
   seconds = {**reg.seconds, 'verify': time.perf_counter() - t0}
   if bev_candidates > 0:
     seconds['bev'] = 0.0
     if fitness[best] < verification.CONFIDENT_FITNESS:
       t1 = time.perf_counter()
-      candidates = np.concatenate([candidates, bev.search(cloud1.footprint, cloud2.footprint,
-                                                          bev_candidates).transforms])
+      candidates = np.concatenate([candidates, pair.bev_poses(bev_candidates)])
       t2 = time.perf_counter()
-      best, refined, fitness = verification.verify(cloud1.target, cloud2.source, candidates,
-                                                   memo=memo)
+      best, refined, fitness = verification.verify(target, source, candidates,
+                                                   memo=pair.memo)
       seconds['bev'] = t2 - t1
       seconds['verify'] += time.perf_counter() - t2
   xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[reg.matches[:, 1]].astype(np.float64)
@@ -267,13 +390,54 @@ def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1, poi
                              verified_fitness=fitness, verified_poses=refined, **stats)
 
 
-def assess(reg: Registration, points1, points2, origin: np.ndarray | None = None
+def coarse_to_fine(levels1: Sequence[Callable[[], CloudFeatures]],
+                   levels2: Sequence[Callable[[], CloudFeatures]], points1, points2=None, *,
+                   seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
+                   max_trials: int = 10_000, estimator: str = 'upright', candidates: int = 10,
+                   bev_candidates: int = 0, verified: bool = True, progress=None
+                   ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
+  """`estimate` (`candidates` poses) and, with `verify`, `verify` on each level of the two
+  clouds' features in turn (callables, coarse first: `FeatureLevels.levels`), until a
+  level's verified pose lays `verification.CONFIDENT_FITNESS` of cloud 2's structure on
+  cloud 1 and no distinct candidate comes near it (`verification.clearly_confident`). The last level is the registration without levels, the BEV search's
+  candidates included; the ones before only end it early (unverified, only the last
+  level runs). points1, points2: as for `verify`; `progress(stage)` as for
+  `register`, on the first level tried. -> (registration, features of cloud 1, of cloud
+  2) of the level that decided, its `seconds` summed over the levels tried and
+  `levels_tried` set."""
+  if not levels1 or len(levels1) != len(levels2):
+    raise ValueError(f'the clouds have {len(levels1)} and {len(levels2)} feature levels')
+  first = 0 if verified else len(levels1) - 1
+  pair = prepared.prepare_pair(points1, points2)   # one memo over the levels
+  stage = (lambda name: None) if progress is None else progress
+  # 'bev' is 0 where an earlier level or RANSAC's confident pose made the search needless.
+  spent: dict[str, float] = {'bev': 0.0} if verified and bev_candidates > 0 else {}
+  for n in range(first, len(levels1)):
+    last = n == len(levels1) - 1
+    f1, f2 = levels1[n](), levels2[n]()
+    if n == first:
+      stage('RANSAC')
+    reg = estimate(f1, f2, seed, inlier_threshold, confidence, max_trials, estimator,
+                   candidates)
+    if verified:
+      if n == first:
+        stage('verification')
+      reg = verify(reg, f1, f2, pair, None, inlier_threshold, bev_candidates if last else 0,
+                   confident_only=not last)
+    for name, s in reg.seconds.items():
+      spent[name] = spent.get(name, 0.0) + s
+    if last or verification.clearly_confident(reg.verified_poses, reg.verified_fitness):
+      return dataclasses.replace(reg, seconds=spent, levels_tried=n - first + 1), f1, f2
+
+
+def assess(reg: Registration, points1, points2=None, origin: np.ndarray | None = None
            ) -> Registration:
   """`reg` with its `uncertainty` at its transform (`uncertainty.assess`): points1, points2
   as for `verify`; `origin` [3]: cloud 1's frame origin in their coordinates (default 0).
   Uses the verification's candidates where `reg` was verified."""
   t0 = time.perf_counter()
-  cloud1, cloud2 = prepared.prepare(points1), prepared.prepare(points2)
+  pair = prepared.prepare_pair(points1, points2)
+  cloud1, cloud2 = pair.cloud1, pair.cloud2
   assessed = uncertainty_lib.assess(cloud1.target, cloud2.source.points, reg.transform,
                                     reg.verified_poses, reg.verified_fitness, origin)
   return dataclasses.replace(reg, uncertainty=assessed,
@@ -343,31 +507,37 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
     local.append(cloud)
     grids.append((grid, time.perf_counter() - t0))
 
-  def features_of(c, name, kind):
-    f = cloud_features(c, kind, descriptor, model, seed, fpfh_max_nn, 0,
-                       lambda s: stage(f'{name}: {s}'))
-    f.grid, f.seconds['grid'] = grids[0 if name == 'cloud 1' else 1]
-    return f
+  coarse = COARSE_KEYPOINTS if verify_candidates > 0 else 0
 
-  f1, f2 = (features_of(c, name, keypoints) for c, name in zip(local, ('cloud 1', 'cloud 2')))
-  notes = [f'{name}: {f.note}' for name, f in (('cloud 1', f1), ('cloud 2', f2)) if f.note]
-  stage('RANSAC')
+  def levels_of(c, name, kind):
+    stage(f'{name}: keypoints')
+    levels = feature_levels(c, kind, descriptor, model, seed, fpfh_max_nn, coarse)
+    levels.keypoints(0)
+    stage(f'{name}: descriptors')
+    levels.levels[0]()   # the first level's, timed as this stage
+    levels.grid, levels.seconds['grid'] = grids[0 if name == 'cloud 1' else 1]
+    return levels
+
+  names = ('cloud 1', 'cloud 2')
+  levels = [levels_of(c, name, keypoints) for c, name in zip(local, names)]
+  notes = [f'{name}: {f.note}' for name, f in zip(names, levels) if f.note]
+  cloud1, cloud2 = (prepared.PreparedCloud(c) for c in local)
   k = max(verify_candidates, 1)
+  register_levels = lambda: coarse_to_fine(
+      levels[0].levels, levels[1].levels, cloud1, cloud2, seed=seed, estimator=estimator,
+      candidates=k, bev_candidates=bev_candidates, verified=verify_candidates > 0,
+      progress=stage)
   try:
-    reg = estimate(f1, f2, seed, estimator=estimator, candidates=k)
+    reg, f1, f2 = register_levels()
   except ValueError as e:
     if keypoints != 'iss':
       raise
     # Degenerate samples (every match on one line of points) or too few keypoints: keypoints
     # spread over the whole of both clouds give RANSAC something to sample.
-    f1, f2 = (features_of(c, name, 'auto') for c, name in zip(local, ('cloud 1', 'cloud 2')))
-    notes.append(f'{e}; registered again with {len(f1.xyz)} / {len(f2.xyz)} farthest-point '
-                 'keypoints')
-    reg = estimate(f1, f2, seed, estimator=estimator, candidates=k)
-  cloud1, cloud2 = (prepared.PreparedCloud(c) for c in local)
-  if verify_candidates > 0:
-    stage('verification')
-    reg = verify(reg, f1, f2, cloud1, cloud2, bev_candidates=bev_candidates)
+    levels = [levels_of(c, name, 'auto') for c, name in zip(local, names)]
+    notes.append(f'{e}; registered again with {len(levels[0].idx)} / {len(levels[1].idx)} '
+                 'farthest-point keypoints')
+    reg, f1, f2 = register_levels()
   reg.notes = notes
   if icp:
     stage('ICP')

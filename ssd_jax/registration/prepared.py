@@ -1,9 +1,13 @@
-"""One cloud as the BEV search and the verification use it, each part made once.
+"""One cloud, and one pair, as the BEV search and the verification use them, each part
+made once.
 
 In a batch a scan meets many others (consecutive scans, loop-closure candidates, the
 pairs of an evaluation set): its footprint for the bird's-eye-view search, its normals
 and KD-tree as the cloud aligned to, and its points as the cloud moved, are the same for
-every pair, so `PreparedCloud` makes each on first use and keeps it.
+every pair, so `PreparedCloud` makes each on first use and keeps it. A pair registered
+more than once (coarse to fine, or several methods of an evaluation on one pair) has the
+same BEV search poses and the same ICP from each start pose every time: `PreparedPair`
+keeps those.
 """
 
 from __future__ import annotations
@@ -42,3 +46,32 @@ class PreparedCloud:
 def prepare(points) -> PreparedCloud:
   """points [N, 3] or a `PreparedCloud` (returned as it is)."""
   return points if isinstance(points, PreparedCloud) else PreparedCloud(points)
+
+
+class PreparedPair:
+  """Cloud 1 (the target) and cloud 2 (the source, moved onto it) as `PreparedCloud`s,
+  with `memo`, what is made of the two together: the verification's ICP and fitness per
+  start pose (`verification.verify`) and the BEV search's poses (`bev_poses`). A memo
+  holds poses and numbers only, so a caller may keep it for the pair (and pass it in
+  again) after the clouds themselves are gone."""
+
+  def __init__(self, cloud1, cloud2, memo: dict | None = None):
+    self.cloud1, self.cloud2 = prepare(cloud1), prepare(cloud2)
+    self.memo = {} if memo is None else memo
+
+  def bev_poses(self, k: int) -> np.ndarray:
+    """The k best T_12 [k, 4, 4] of `bev.search` on the two footprints."""
+    key = ('bev', k)
+    if key not in self.memo:
+      self.memo[key] = bev.search(self.cloud1.footprint, self.cloud2.footprint, k).transforms
+    return self.memo[key]
+
+
+def prepare_pair(points1, points2) -> PreparedPair:
+  """A `PreparedPair` of points1 (cloud 1) and points2 (cloud 2) [N, 3] or
+  `PreparedCloud`s; a `PreparedPair` as points1 (points2 None) is returned as it is."""
+  if isinstance(points1, PreparedPair):
+    if points2 is not None:
+      raise ValueError('a PreparedPair already holds cloud 2')
+    return points1
+  return PreparedPair(points1, points2)

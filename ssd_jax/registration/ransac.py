@@ -167,13 +167,22 @@ FIRST_BATCH = 32
 
 def _numpy_scorer(xyz1: np.ndarray, xyz2: np.ndarray, threshold: float):
   """samples [B, 3] -> inlier counts [B], as `ransac_sequential` counts them."""
+  planes = [np.ascontiguousarray(xyz2[:, k]) for k in range(3)]
+  thr2 = threshold * threshold
+
   def score(samples: np.ndarray) -> np.ndarray:
     t = kabsch(xyz2[samples], xyz1[samples])                       # [B, 4, 4]
-    d = xyz2 @ np.swapaxes(t[:, :3, :3], -1, -2)                   # [B, C, 3], in place:
-    d += t[:, None, :3, 3]                                         # 3x faster than a norm
-    d -= xyz1
-    d *= d
-    return np.sum(d.sum(-1) < threshold * threshold, axis=1)
+    # Each residual coordinate as a [B, C] plane, summed in place: 2x faster than
+    # [B, C, 3] products with the 3 x 3 rotations.
+    total = np.zeros((len(samples), len(xyz1)))
+    for i in range(3):
+      d = t[:, i, 0, None] * planes[0]
+      d += t[:, i, 1, None] * planes[1]
+      d += t[:, i, 2, None] * planes[2]
+      d += t[:, i, 3, None] - xyz1[:, i]
+      d *= d
+      total += d
+    return np.sum(total < thr2, axis=1)
   return score
 
 
