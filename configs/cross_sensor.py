@@ -17,7 +17,7 @@ Writes WORKDIR/<set>.md (summary, one success matrix per method) and <set>.csv (
 RTE, RRE and inlier ratio per method x unit x distance). docs/cross_sensor.md has the
 protocol and every cell.
 
-Expected (2-core AMD EPYC VM, ~36 minutes with every row: docs/benchmarks.md): real
+Expected (2-core AMD EPYC VM, ~31 minutes with every row: docs/benchmarks.md): real
 re-scans (96 pairs), defaults + ours 99.0 %, defaults + FPFH 97.9 %, BEV alone 92.7 %,
 farthest-point + upright ours 91.7 %, Open3D's pipeline 38.5 % (its RANSAC is not
 repeatable: +-1 pair), paper protocol ISS + ours 49.0 %, ISS + FPFH 36.5 %; synthetic (120
