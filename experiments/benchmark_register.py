@@ -9,12 +9,13 @@ Methods, each on every pair of each set (`--num_pairs`: the first N, 0 all):
 
   * register: `python -m experiments.register` with its defaults (the shipped `ours`,
     farthest-point keypoints, 512 then 1,024 where those leave the pose in doubt, upright
-    RANSAC, its 10 best poses and the BEV search's 5 verified against the clouds). batch: the whole `--pairs` command in a new
-    process, its wall time per pair (imports, loading the model and reading included)
-    and the median of its per-pair seconds (registrations.csv, which also gives each
-    stage's seconds); warm: one pair in a process that registered another before (the
-    library's `batch.Registrar`, as the command); cold: one pair in a new process, after
-    one run has filled the persistent compilation cache, as any second use finds it.
+    RANSAC, its 10 best poses and the BEV search's 5 verified against the clouds). batch:
+    the whole `--pairs` command in a new process, its wall time per pair (imports, loading
+    the model and reading included) and the median of its per-pair seconds
+    (registrations.csv, which also gives each stage's seconds); warm: one pair in a
+    process that registered another before (the library's `batch.Registrar`, as the
+    command); cold: one pair in a new process, after one run has filled the persistent
+    compilation cache, as any second use finds it.
   * open3d: Open3D's own ISS + FPFH + RANSAC pipeline with the paper's searches
     (`ssd_jax.registration.reference`), in process; cold as a plain script that imports
     Open3D, numpy and the file reader only.

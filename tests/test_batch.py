@@ -160,3 +160,20 @@ def test_verification_for_a_confident_pose_only_refines_none_far_from_confidence
   alone = verification.verify(target, source, np.stack([wrong, near]))
   assert best == 1 and fit[1] >= verification.CONFIDENT_FITNESS
   np.testing.assert_array_equal(refined[1], alone[1][1])
+
+
+def test_a_confident_pose_ends_the_search_only_when_clearly_best():
+  """Confident (>= CONFIDENT_FITNESS) and no pose 2 m / 5 degrees away within FINE_MARGIN:
+  a near copy of the best does not count against it, a distinct runner-up does."""
+  shifted = lambda x, yaw=0.0: geometry.make_transform(geometry.rotation_z(np.radians(yaw)),
+                                                      np.array([x, 0.0, 0.0]))
+  best = verification.CONFIDENT_FITNESS + 0.3
+  close = best - verification.FINE_MARGIN / 2
+  assert verification.clearly_confident(np.stack([shifted(0), shifted(0.3, 1.0)]),
+                                        np.array([best, close]))
+  assert not verification.clearly_confident(np.stack([shifted(0), shifted(1.8, 13.0)]),
+                                            np.array([best, close]))
+  assert verification.clearly_confident(np.stack([shifted(0), shifted(1.8, 13.0)]),
+                                        np.array([best, best - 2 * verification.FINE_MARGIN]))
+  assert not verification.clearly_confident(shifted(0)[None],
+                                            np.array([verification.CONFIDENT_FITNESS - 0.01]))

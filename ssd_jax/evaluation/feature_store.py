@@ -228,8 +228,9 @@ class FeatureStore:
     key = (str(path), kp, name)
     if key not in self._descriptors:
       points, idx = self.cloud(path), self.keypoints(path, kp)
-      if desc in BUILTIN_DESCRIPTORS and len(self.fpfh_keypoints) > 1 and kp in self.fpfh_keypoints:
-        describe = lambda at, sources=self.fpfh_keypoints: self._fpfh_together(path, sources, at)
+      sources = self.fpfh_keypoints
+      if desc in BUILTIN_DESCRIPTORS and len(sources) > 1 and kp in sources:
+        describe = lambda at: self._fpfh_together(path, sources, at)
       elif desc in BUILTIN_DESCRIPTORS:
         describe = lambda at: pipeline.compute_descriptors(points, at, desc,
                                                            fpfh_max_nn=self.fpfh_max_nn)

@@ -74,7 +74,7 @@ class Registrar:
       self._say(f'voxel: {os.path.basename(path)}: {note}')
     f = pipeline.feature_levels(points, self.keypoints, self.descriptor, self.model,
                                 self.seed, self.fpfh_max_nn,
-                                pipeline.COARSE_KEYPOINTS if self.verify > 0 else 0)
+                                pipeline.coarse_keypoints(self.verify > 0))
     if f.note:
       self._say(f'{os.path.basename(path)}: {f.note}')
     entry = _Cloud(prepared.PreparedCloud(points), f, {'read': t1 - t0, 'grid': t2 - t1})
@@ -89,8 +89,8 @@ class Registrar:
     of cloud 2). `registration.seconds` holds every stage this pair cost: reading and
     gridding a cloud met for the first time, the keypoints and descriptors it made (each
     once: a cloud's coarse level first, the rest when a pair needs them,
-    `pipeline.coarse_to_fine`), matching, RANSAC, the BEV search, the verification and the pose's assessment
-    (`registration.uncertainty`). A cloud that cannot be registered (too
+    `pipeline.coarse_to_fine`), matching, RANSAC, the BEV search, the verification and
+    the pose's assessment (`registration.uncertainty`). A cloud that cannot be registered (too
     few points, flat) is a ValueError; a bad file the reader's error."""
     seconds = collections.defaultdict(float)
     entries = []
@@ -115,7 +115,7 @@ class Registrar:
       # As pipeline.register: keypoints spread over both clouds, this pair only.
       fallback = [pipeline.feature_levels(e_.points.points, 'auto', self.descriptor,
                                           self.model, self.seed, self.fpfh_max_nn,
-                                          pipeline.COARSE_KEYPOINTS if self.verify > 0 else 0)
+                                          pipeline.coarse_keypoints(self.verify > 0))
                   for e_ in entries]
       self._say(f'{os.path.basename(path1)} / {os.path.basename(path2)}: {e}; '
                 'registered again with farthest-point keypoints')

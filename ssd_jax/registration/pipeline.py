@@ -280,6 +280,12 @@ def auto_keypoints(points: np.ndarray, num: int = keypoints_lib.FARTHEST_POINT_K
   return idx, np.searchsorted(idx, np.unique(order[:coarse]))
 
 
+def coarse_keypoints(verified: bool) -> int:
+  """The coarse level's keypoint count: COARSE_KEYPOINTS where the poses are verified (a
+  level ends the search only on a verified pose), else 0 (one level)."""
+  return COARSE_KEYPOINTS if verified else 0
+
+
 def feature_levels(points: np.ndarray, keypoints: str = 'auto', descriptor: str = 'learned',
                    model=None, seed: int = 0, fpfh_max_nn: int = features.FPFH_MAX_NN,
                    coarse: int = COARSE_KEYPOINTS) -> FeatureLevels:
@@ -396,15 +402,15 @@ def coarse_to_fine(levels1: Sequence[Callable[[], CloudFeatures]],
                    max_trials: int = 10_000, estimator: str = 'upright', candidates: int = 10,
                    bev_candidates: int = 0, verified: bool = True, progress=None
                    ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
-  """`estimate` (`candidates` poses) and, with `verify`, `verify` on each level of the two
-  clouds' features in turn (callables, coarse first: `FeatureLevels.levels`), until a
+  """`estimate` (`candidates` poses) and, where `verified`, `verify` on each level of the
+  two clouds' features in turn (callables, coarse first: `FeatureLevels.levels`), until a
   level's verified pose lays `verification.CONFIDENT_FITNESS` of cloud 2's structure on
-  cloud 1 and no distinct candidate comes near it (`verification.clearly_confident`). The last level is the registration without levels, the BEV search's
-  candidates included; the ones before only end it early (unverified, only the last
-  level runs). points1, points2: as for `verify`; `progress(stage)` as for
-  `register`, on the first level tried. -> (registration, features of cloud 1, of cloud
-  2) of the level that decided, its `seconds` summed over the levels tried and
-  `levels_tried` set."""
+  cloud 1 and no distinct candidate comes near it (`verification.clearly_confident`).
+  The last level is the registration without levels, the BEV search's candidates
+  included; the ones before only end it early (unverified, only the last level runs).
+  points1, points2: as for `verify`; `progress(stage)` as for `register`, on the first
+  level tried. -> (registration, features of cloud 1, of cloud 2) of the level that
+  decided, its `seconds` summed over the levels tried and `levels_tried` set."""
   if not levels1 or len(levels1) != len(levels2):
     raise ValueError(f'the clouds have {len(levels1)} and {len(levels2)} feature levels')
   first = 0 if verified else len(levels1) - 1
@@ -507,7 +513,7 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
     local.append(cloud)
     grids.append((grid, time.perf_counter() - t0))
 
-  coarse = COARSE_KEYPOINTS if verify_candidates > 0 else 0
+  coarse = coarse_keypoints(verify_candidates > 0)
 
   def levels_of(c, name, kind):
     stage(f'{name}: keypoints')
