@@ -5,19 +5,19 @@ Command (what `experiments.adapt` runs, with its model card and export):
 
     python -m experiments.adapt --scans=/data/my_vlp16_scans --out=exports/my_vlp16
 
-`configs/cpu_robust.py` (the recipe of `ours`: the self-rotation over the whole circle,
+`configs/ours.py` (the recipe of `ours`: the self-rotation over the whole circle,
 two samplings of each scan in the two branches) started from `ours`' weights, at a third
 of its learning rate, decayed to 0 over 1,500 steps: under 10 minutes on 2 CPU
-cores (docs/benchmarks.md).
+cores (docs/notes/benchmarks.md).
 Each scan must be one sweep centred on its sensor (z up), as the sensor wrote it or
-voxelised. docs/cross_sensor.md measures it on 16-beam scans the shipped model never saw.
+voxelised. docs/notes/cross_sensor.md measures it on 16-beam scans the shipped model never saw.
 """
 
-from ssd_jax.configs import cpu_robust
+from ssd_jax.configs import ours as ours_config
 
 
 def get_config():
-  config = cpu_robust.get_config()
+  config = ours_config.get_config()
   config.data.path = ''              # set by --scans
   config.data.eval_path = ''
   config.train.init_from = 'ours'

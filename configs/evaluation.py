@@ -16,8 +16,8 @@ def get_config() -> ml_collections.ConfigDict:
   # Each is a shipped pretrained model's name (ssd_jax/weights/<name>, see
   # ssd_jax.pretrained.SHIPPED), an export folder or a training run directory.
   config.checkpoints = ml_collections.ConfigDict({
-      'ours': 'ours',                       # self-supervised (configs/cpu_robust.py)
-      # Weakly supervised 3DFeat-Net baseline on ours' network (configs/feat3dnet_robust.py).
+      'ours': 'ours',                       # self-supervised (configs/ours.py)
+      # Weakly supervised 3DFeat-Net baseline on ours' network (configs/feat3dnet.py).
       'feat3dnet': 'feat3dnet',
       'ours_detector': 'ours_detector',     # self-supervised detector (extension)
   })

@@ -9,7 +9,7 @@ Batch 6 x 4,096 points, 512 FPS clusters of 64 points within 2 m, 32-D
 descriptors, alpha 1, Adam 1e-3 for 72,500 steps (3DFeat-Net's 20 epochs),
 self-rotation phi ~ N(0, 0.6^2) rad about z, jitter sigma 0.01 m. The paper
 saves this model at step 72,500; its CF rotation error on held-out scans falls
-below 1 degree within the first few thousand steps (docs/benchmarks.md).
+below 1 degree within the first few thousand steps (docs/notes/benchmarks.md).
 """
 
 import ml_collections

@@ -11,7 +11,7 @@ train the self-supervised objective of the paper, which needs no poses. OUT/run 
 the training run (rerun the command to resume it); OUT holds the exported model
 (config.json, weights.msgpack) and MODEL_CARD.md (base model, scans, steps, wall time,
 machine, command). Under 10 minutes on 2 CPU cores at the default
-1,500 steps (docs/benchmarks.md).
+1,500 steps (docs/notes/benchmarks.md).
 """
 
 import datetime
@@ -23,8 +23,8 @@ import time
 from absl import app
 from absl import flags
 
-from ssd_jax import checkpoint, cli, config_checks, pretrained, train
-from ssd_jax.data import clean, io
+from ssd_jax import cli, pretrained, train
+from ssd_jax.data import io
 from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
@@ -84,9 +84,6 @@ def main(argv):
     model = pretrained.export_run(run_dir, FLAGS.out, card=card)
   except io.CloudFileError as e:
     raise SystemExit(f'error: --scans: {e}') from None
-  except (config_checks.ConfigError, clean.CloudDataError, train.TrainingDiverged,
-          checkpoint.CheckpointError, FileNotFoundError, ValueError) as e:
-    raise SystemExit(f'error: {e}') from None
   print(f'wrote {FLAGS.out}: {FLAGS.init} adapted on {num_scans} scans of {FLAGS.scans} '
         f'({model.step} steps, {minutes:.1f} min); use it with --checkpoint={FLAGS.out}')
 

@@ -1,12 +1,12 @@
 r"""Training-step benchmark: speed, achieved FLOP rate, compile time and peak memory.
 
-    python -m experiments.benchmark                       # paper + cpu_small configs
-    python -m experiments.benchmark --configs=cpu_small --steps=10
+    python -m experiments.benchmark                       # paper + paper_small configs
+    python -m experiments.benchmark --configs=paper_small --steps=10
 
 Prints one table row per config plus this machine's JAX fp32 matmul rate
 (2048 x 2048, jit, median) as the ceiling. FLOPs are counted analytically
 over the dense layers (training = 3 x forward: forward, input and weight
-gradients), as in docs/benchmarks.md; XLA's own count of the compiled step is
+gradients), as in docs/notes/benchmarks.md; XLA's own count of the compiled step is
 shown beside it. Each config runs in a fresh subprocess so its peak RSS is
 its own. A breakdown of the paper config's step (FPS, ball query, network)
 shows where the time goes.
@@ -33,7 +33,7 @@ import numpy as np
 from ssd_jax import grouping, train  # pylint: disable=g-import-not-at-top,wrong-import-position
 
 FLAGS = flags.FLAGS
-flags.DEFINE_list('configs', ['paper', 'cpu_small'], 'Config modules under configs/.')
+flags.DEFINE_list('configs', ['paper', 'paper_small'], 'Config modules under configs/.')
 flags.DEFINE_integer('steps', 5, 'Timed steps per config (after compilation).')
 flags.DEFINE_bool('breakdown', True, 'Also time the parts of the paper-config step.')
 flags.DEFINE_string('child', None, 'Internal: benchmark this one config and print JSON.')

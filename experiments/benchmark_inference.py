@@ -15,7 +15,8 @@ from absl import flags
 import jax
 import numpy as np
 
-from ssd_jax.configs import paper, synthetic
+from ssd_jax.configs import paper
+from ssd_jax.configs.data import synthetic
 from ssd_jax import cli, inference, train
 from ssd_jax.data import io, preprocess
 from ssd_jax.synthetic import dataset

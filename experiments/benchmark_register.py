@@ -13,7 +13,7 @@ Methods, each on every pair of each set (`--num_pairs`: the first N, 0 all):
     the whole `--pairs` command in a new process, its wall time per pair (imports, loading
     the model and reading included) and the median of its per-pair seconds
     (registrations.csv, which also gives each stage's seconds); warm: one pair in a
-    process that registered another before (the library's `batch.Registrar`, as the
+    process that registered another before (the library's `pipeline.register_many`, as the
     command); cold: one pair in a new process, after one run has filled the persistent
     compilation cache, as any second use finds it.
   * open3d: Open3D's own ISS + FPFH + RANSAC pipeline with the paper's searches
@@ -28,7 +28,7 @@ Loop closure (`--loop_scans=N`): the register command over every pair among the 
 clouds of the first set, as a back end's loop-closure candidates meet each scan many
 times (timing only: most of those pairs do not overlap).
 
-Prints the table of docs/benchmarks.md: per set and method, seconds per pair (median and
+Prints the table of docs/notes/benchmarks.md: per set and method, seconds per pair (median and
 mean), success (RTE < 2 m, RRE < 5 degrees) and the ratio to each anchor; then the
 register command's seconds per stage (median over the pairs).
 """
@@ -49,7 +49,7 @@ from tqdm import auto as tqdm
 from ssd_jax import cli, pretrained
 from ssd_jax.data import clean, io, registration_sets
 from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.registration import batch, metrics, pipeline, reference
+from ssd_jax.registration import metrics, pipeline, reference
 
 FLAGS = flags.FLAGS
 flags.DEFINE_list('datasets', ['data_cache/cross_sensor/real', 'data_cache/real_pairs'],
@@ -168,10 +168,7 @@ def main(argv):
     raise SystemExit(f'error: --methods must be among {list(METHODS)}, got {bad}')
   if FLAGS.num_pairs < 0 or FLAGS.cold_pairs < 0 or FLAGS.loop_scans < 0:
     raise SystemExit('error: --num_pairs, --cold_pairs and --loop_scans must be >= 0')
-  try:
-    sets = {d: registration_sets.read_registration_set(d) for d in FLAGS.datasets}
-  except (io.CloudFileError, FileNotFoundError) as e:
-    raise SystemExit(f'error: {e}') from None
+  sets = {d: registration_sets.read_registration_set(d) for d in FLAGS.datasets}
   if FLAGS.num_pairs:
     sets = {d: pairs[:FLAGS.num_pairs] for d, pairs in sets.items()}
   kiss = _kiss_matcher() if 'kiss_matcher' in FLAGS.methods else None
@@ -188,20 +185,19 @@ def main(argv):
       rows.append((name, 'register', 'batch, whole command / pairs', len(pairs),
                    [wall / len(pairs)], None))
       stage_rows.append((name, {s: float(np.median([float(r[f'seconds_{s}'] or 0) for r in out]))
-                                for s in batch.STAGES}))
+                                for s in pipeline.STAGES}))
     for method in methods[1:] if methods[0] == 'register' else methods:
       seconds, ok = _in_process(method, pairs, kiss)
       rows.append((name, method, 'batch, in process', len(pairs), seconds, ok))
   first = next(iter(sets.values()))
   if 'register' in methods:
-    registrar = batch.Registrar(_read, model=pipeline.verified_model(pretrained.load("ours")),
-                                say=lambda line: None)
-    registrar.register(first[1].cloud1, first[1].cloud2)   # warm: another pair first
-    t0 = time.perf_counter()
-    reg, _, _ = registrar.register(first[0].cloud1, first[0].cloud2)
+    # Warm: another pair first, then pair 0 (its own clouds, met for the first time).
+    *_, warm = pipeline.register_many(
+        [(first[1].cloud1, first[1].cloud2), (first[0].cloud1, first[0].cloud2)], _read,
+        model=pretrained.load('ours'), say=lambda line: None)
     rows.append(('(first set, pair 0)', 'register', 'warm: 1 pair in process', 1,
-                 [time.perf_counter() - t0],
-                 [bool(metrics.registration_errors(first[0].transform, reg.transform)['success'])]))
+                 [warm.seconds], [bool(metrics.registration_errors(
+                     first[0].transform, warm.registration.transform)['success'])]))
     if FLAGS.loop_scans:
       clouds = list(dict.fromkeys(c for p in first for c in (p.cloud1, p.cloud2)))
       loop = list(itertools.combinations(clouds[:FLAGS.loop_scans], 2))
@@ -239,10 +235,10 @@ def _print(rows, stage_rows) -> None:
           f'{np.mean(seconds):.3f} | {success} | {ratio("kiss_matcher")} | {ratio("open3d")} |')
   if stage_rows:
     print('\nregister (batch), median seconds per pair by stage\n')
-    print('| set | ' + ' | '.join(batch.STAGES) + ' |')
-    print('|---|' + '---|' * len(batch.STAGES))
+    print('| set | ' + ' | '.join(pipeline.STAGES) + ' |')
+    print('|---|' + '---|' * len(pipeline.STAGES))
     for name, stages in stage_rows:
-      print(f'| {name} | ' + ' | '.join(f'{stages[s]:.3f}' for s in batch.STAGES) + ' |')
+      print(f'| {name} | ' + ' | '.join(f'{stages[s]:.3f}' for s in pipeline.STAGES) + ' |')
 
 if __name__ == '__main__':
   cli.run(main)

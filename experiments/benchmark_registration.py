@@ -209,10 +209,7 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
-  try:
-    pairs = registration_sets.read_registration_set(FLAGS.dataset)[:FLAGS.num_pairs]
-  except io.CloudFileError as e:
-    raise SystemExit(f'error: {e}') from None
+  pairs = registration_sets.read_registration_set(FLAGS.dataset)[:FLAGS.num_pairs]
   if len(pairs) < 2:
     raise SystemExit(f'error: {FLAGS.dataset} has {len(pairs)} pair(s); 2 or more needed')
   bad = sorted(set(FLAGS.methods) - set(NAMES))

@@ -1,10 +1,10 @@
 r"""Run the evaluations a config names (`config.evals`) and write their report.
 
-    python -m experiments.evaluate --config=configs/registration.py --workdir=runs/reg
+    python -m experiments.evaluate --config=configs/evals/registration.py --workdir=runs/reg
     python -m experiments.evaluate --config=configs/reproduce.py \
         --config.data_root=DIR --workdir=OUT
 
-configs/registration.py (Tables I / II), precision.py (Fig. 4), repeatability.py,
+configs/evals/registration.py (Tables I / II), precision.py (Fig. 4), repeatability.py,
 descriptor_matching.py (Table III) name one evaluation each; reproduce.py names every
 table and figure of the paper (ssd_jax/evaluation/evaluators.py describes the types).
 Writes each evaluation's tables and figures into WORKDIR under its name, and
@@ -25,7 +25,7 @@ from ssd_jax.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Output directory.')
-cli.define_config_file('config', 'configs/registration.py', 'Evaluation config.')
+cli.define_config_file('config', 'configs/evals/registration.py', 'Evaluation config.')
 cli.define_distributed_flags()
 flags.mark_flags_as_required(['workdir'])
 

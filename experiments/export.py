@@ -1,7 +1,7 @@
 r"""Export a training run's checkpoint as a small pretrained model folder (weights and
 BatchNorm statistics, no optimizer state, and the config), loadable by name or path.
 
-    python -m experiments.export --run=runs/cpu_robust --out=ssd_jax/weights/ours [--step=12000] \
+    python -m experiments.export --run=runs/ours --out=ssd_jax/weights/ours [--step=12000] \
         [--num_samples=64 --draws=4]
 
 A MODEL_CARD.md already in OUT is kept; write one (data, config, steps, wall time,
@@ -25,11 +25,8 @@ flags.mark_flags_as_required(['run', 'out'])
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
-  try:
-    model = pretrained.export_run(FLAGS.run, FLAGS.out, FLAGS.step, FLAGS.num_samples,
-                                  FLAGS.draws)
-  except (FileNotFoundError, ValueError) as e:
-    raise SystemExit(f'error: {e}') from None
+  model = pretrained.export_run(FLAGS.run, FLAGS.out, FLAGS.step, FLAGS.num_samples,
+                                FLAGS.draws)
   print(f'exported step {model.step} of {FLAGS.run} to {FLAGS.out}')
 
 

@@ -2,13 +2,13 @@ r"""Learning curves and equal-step ablations: checkpoints of one or more trainin
 registered on the test sets beside ISS + FPFH; a CSV, a Markdown table and a PNG plot.
 
     # every kept checkpoint of one run
-    python -m experiments.learning_curve --run=runs/cpu_robust --out=runs/curve
+    python -m experiments.learning_curve --run=runs/ours --out=runs/curve
     # several runs at equal steps (an ablation)
     python -m experiments.learning_curve --run=paper=runs/abl_paper \
-        --run=robust=runs/cpu_robust --steps=3000 --out=runs/ablation
+        --run=robust=runs/ours --steps=3000 --out=runs/ablation
 
 Default sets: the synthetic KITTI-style test set as scanned and with each scan turned
-by a random yaw (configs/synthetic_kitti_yaw.py), the Oxford-style test set and the
+by a random yaw (configs/data/synthetic_kitti_yaw.py), the Oxford-style test set and the
 re-scan pairs of the real scans (experiments.make_real_pairs); --set=NAME=DIR replaces
 them. Rerun
 while training goes on: finished cells are read back from OUT/learning_curve.csv.
@@ -21,7 +21,7 @@ from absl import app
 from absl import flags
 
 from ssd_jax import checkpoint, cli, inference, viz
-from ssd_jax.data import io, registration_sets
+from ssd_jax.data import registration_sets
 from ssd_jax.evaluation import learning_curve, registration, tables
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import features
@@ -47,13 +47,13 @@ flags.mark_flags_as_required(['run'])
 # The default sets and the commands that make them.
 _MADE_BY = {
     'data_cache/synthetic_small/test_kitti': 'python -m experiments.make_synthetic '
-                                             '--config=configs/synthetic_small.py '
+                                             '--config=configs/data/synthetic_small.py '
                                              '--out=data_cache/synthetic_small',
     'data_cache/synthetic_small/test_oxford': 'python -m experiments.make_synthetic '
-                                              '--config=configs/synthetic_small.py '
+                                              '--config=configs/data/synthetic_small.py '
                                               '--out=data_cache/synthetic_small',
     'data_cache/synthetic_kitti_yaw/test_kitti': 'python -m experiments.make_synthetic '
-                                                 '--config=configs/synthetic_kitti_yaw.py '
+                                                 '--config=configs/data/synthetic_kitti_yaw.py '
                                                  '--out=data_cache/synthetic_kitti_yaw',
     'data_cache/real_pairs': 'python -m experiments.make_real_pairs',
 }
@@ -91,33 +91,30 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
-  try:
-    runs = dict(_named(spec, 'run') for spec in FLAGS.run)
-    out = FLAGS.out or os.path.join(next(iter(runs.values())), 'learning_curve')
-    sets = {}
-    for spec in FLAGS.set:
-      name, path = _named(spec, 'set')
-      if not os.path.exists(path) and path in _MADE_BY:
-        raise ValueError(f'{path}: no such test set; make it with {_MADE_BY[path]} '
-                         '(or leave it out with --set=NAME=DIR for the sets you have)')
-      sets[name] = registration_sets.read_registration_set(path)
-    wanted = [int(s) for s in FLAGS.steps]
-    checkpoints = []
-    for name, path in runs.items():
-      ckpt = checkpoint.Checkpointer(inference.checkpoint_directory(path), asynchronous=False)
-      kept = ckpt.all_steps()
-      ckpt.close()
-      absent = sorted(set(wanted) - set(kept))
-      if absent:
-        raise ValueError(f'{path}: no checkpoint at steps {absent} (kept: {kept})')
-      checkpoints += [(name, step) for step in (wanted or kept)]
-    os.makedirs(out, exist_ok=True)
-    records = learning_curve.run(sets, checkpoints, lambda r, s: _describing(
-                                     inference.load(runs[r], s)),
-                                 os.path.join(out, 'learning_curve.csv'), FLAGS.baselines,
-                                 FLAGS.seed, progress=True, fpfh_max_nn=FLAGS.fpfh_max_nn)
-  except (ValueError, io.CloudFileError, FileNotFoundError) as e:
-    raise SystemExit(f'error: {e}') from None
+  runs = dict(_named(spec, 'run') for spec in FLAGS.run)
+  out = FLAGS.out or os.path.join(next(iter(runs.values())), 'learning_curve')
+  sets = {}
+  for spec in FLAGS.set:
+    name, path = _named(spec, 'set')
+    if not os.path.exists(path) and path in _MADE_BY:
+      raise ValueError(f'{path}: no such test set; make it with {_MADE_BY[path]} '
+                       '(or leave it out with --set=NAME=DIR for the sets you have)')
+    sets[name] = registration_sets.read_registration_set(path)
+  wanted = [int(s) for s in FLAGS.steps]
+  checkpoints = []
+  for name, path in runs.items():
+    ckpt = checkpoint.Checkpointer(inference.checkpoint_directory(path), asynchronous=False)
+    kept = ckpt.all_steps()
+    ckpt.close()
+    absent = sorted(set(wanted) - set(kept))
+    if absent:
+      raise ValueError(f'{path}: no checkpoint at steps {absent} (kept: {kept})')
+    checkpoints += [(name, step) for step in (wanted or kept)]
+  os.makedirs(out, exist_ok=True)
+  records = learning_curve.run(sets, checkpoints, lambda r, s: _describing(
+                                   inference.load(runs[r], s)),
+                               os.path.join(out, 'learning_curve.csv'), FLAGS.baselines,
+                               FLAGS.seed, progress=True, fpfh_max_nn=FLAGS.fpfh_max_nn)
   text = markdown(records)
   with open(os.path.join(out, 'learning_curve.md'), 'w') as f:
     f.write(f'# Registration of {", ".join(f"{k} ({v})" for k, v in runs.items())}\n\n{text}')

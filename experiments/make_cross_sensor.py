@@ -1,6 +1,6 @@
 r"""The cross-sensor test sets (or reuse them when `--out` already holds them).
 
-    python -m experiments.make_cross_sensor --config=configs/cross_sensor_data.py \
+    python -m experiments.make_cross_sensor --config=configs/data/cross_sensor.py \
         --out=data_cache/cross_sensor [--real=../shared/data] [--overwrite]
     # unlabeled scans of one unit, to adapt a model to it (experiments.adapt)
     python -m experiments.make_cross_sensor --scans_of=vlp16 --out=data_cache/scans_vlp16
@@ -9,7 +9,7 @@ OUT/synthetic: simulated streets, the reference unit against each other unit 5-4
 away (`ssd_jax.synthetic.cross_sensor`); OUT/real: the real scans under --real against
 re-scans of them by each unit (`ssd_jax.data.rescan.make_cross_sensor_set`), skipped
 with a note when --real holds no scans. Both have pairs.tsv naming each pair's sensors
-and distance, which `configs/cross_sensor.py` evaluates as a sensor x distance matrix.
+and distance, which `configs/evals/cross_sensor.py` evaluates as a sensor x distance matrix.
 """
 
 import os
@@ -21,8 +21,8 @@ from absl import flags
 from tqdm import auto as tqdm
 
 from ssd_jax import cli, sensors
-from ssd_jax.data import io, rescan
-from ssd_jax.synthetic import cross_sensor, dataset
+from ssd_jax.data import rescan
+from ssd_jax.synthetic import cross_sensor
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('out', 'data_cache/cross_sensor', 'Output directory.')
@@ -34,7 +34,7 @@ flags.DEFINE_string('scans_of', None, 'Instead of the test sets: write unlabeled
                     'to OUT, e.g. to adapt a model to it (experiments.adapt).')
 flags.DEFINE_integer('num_scenes', 3, 'With --scans_of: scenes driven through (a scan every '
                      '6 m, ~65 per scene).')
-cli.define_config_file('config', 'configs/cross_sensor_data.py', 'Cross-sensor data config.')
+cli.define_config_file('config', 'configs/data/cross_sensor.py', 'Cross-sensor data config.')
 
 
 def _real_set(config, out: Path) -> str:
@@ -62,23 +62,20 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   config, out = FLAGS.config, Path(FLAGS.out)
-  try:
-    if FLAGS.scans_of:
-      sensors.get(FLAGS.scans_of)
-      with tqdm.tqdm(desc=f'{FLAGS.scans_of} scans', unit='scan') as bar:
-        n = cross_sensor.write_sensor_scans(config, FLAGS.scans_of, out, FLAGS.num_scenes,
-                                            progress=bar.update)
-      print(f'wrote {out}: {n} unlabeled {FLAGS.scans_of} scans')
-      return
-    cross_sensor.check_config(config)
-    with tqdm.tqdm(total=cross_sensor.count_pairs(config), desc='synthetic pairs',
-                   unit='pair') as bar:
-      manifest = cross_sensor.generate(config, out / 'synthetic', bar.update, FLAGS.overwrite)
-    print(f'{"reusing" if manifest["reused"] else "wrote"} {out / "synthetic"}: '
-          f'{manifest["pairs"]} pairs')
-    print(_real_set(config, out / 'real'))
-  except (dataset.SyntheticConfigError, io.CloudFileError, ValueError) as e:
-    raise SystemExit(f'error: {e}') from None
+  if FLAGS.scans_of:
+    sensors.get(FLAGS.scans_of)
+    with tqdm.tqdm(desc=f'{FLAGS.scans_of} scans', unit='scan') as bar:
+      n = cross_sensor.write_sensor_scans(config, FLAGS.scans_of, out, FLAGS.num_scenes,
+                                          progress=bar.update)
+    print(f'wrote {out}: {n} unlabeled {FLAGS.scans_of} scans')
+    return
+  cross_sensor.check_config(config)
+  with tqdm.tqdm(total=cross_sensor.count_pairs(config), desc='synthetic pairs',
+                 unit='pair') as bar:
+    manifest = cross_sensor.generate(config, out / 'synthetic', bar.update, FLAGS.overwrite)
+  print(f'{"reusing" if manifest["reused"] else "wrote"} {out / "synthetic"}: '
+        f'{manifest["pairs"]} pairs')
+  print(_real_set(config, out / 'real'))
 
 
 def console():

@@ -24,7 +24,7 @@ from absl import flags
 from tqdm import auto as tqdm
 
 from ssd_jax import cli, sensors
-from ssd_jax.data import io, rescan
+from ssd_jax.data import rescan
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('real', os.environ.get('SSD_JAX_SHARED_DATA', '../shared/data'),
@@ -67,13 +67,10 @@ def main(argv):
   cfg = rescan.RescanConfig(max_range=FLAGS.max_range, occlusion=not FLAGS.submaps,
                             sensor=FLAGS.sensor, min_shift=FLAGS.min_shift,
                             max_shift=FLAGS.max_shift)
-  try:
-    with tqdm.tqdm(total=len(sources) * FLAGS.pairs_per_cloud, desc='re-scan pairs',
-                   unit='pair') as bar:
-      rows = rescan.make_rescan_set(sources, FLAGS.out, FLAGS.seed, FLAGS.pairs_per_cloud,
-                                    cfg, progress=bar.update)
-  except (io.CloudFileError, ValueError) as e:
-    raise SystemExit(f'error: {e}') from None
+  with tqdm.tqdm(total=len(sources) * FLAGS.pairs_per_cloud, desc='re-scan pairs',
+                 unit='pair') as bar:
+    rows = rescan.make_rescan_set(sources, FLAGS.out, FLAGS.seed, FLAGS.pairs_per_cloud,
+                                  cfg, progress=bar.update)
   print(f'wrote {FLAGS.out}: {len(rows)} pairs from {len(sources)} real scans')
 
 

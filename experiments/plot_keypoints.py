@@ -34,13 +34,10 @@ def main(argv):
     raise SystemExit(f'error: unknown keypoint source(s) {bad}; choose from {pipeline.KEYPOINTS}')
   if 'learned' in FLAGS.sources and not FLAGS.checkpoint:
     raise SystemExit('error: learned keypoints need --checkpoint')
-  try:
-    points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
-    model = None
-    if FLAGS.checkpoint:
-      model = pretrained.load(FLAGS.checkpoint)
-  except (io.CloudFileError, FileNotFoundError, ValueError) as e:
-    raise SystemExit(f'error: {e}') from None
+  points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
+  model = None
+  if FLAGS.checkpoint:
+    model = pretrained.load(FLAGS.checkpoint)
   shown = {}
   for source in FLAGS.sources:
     idx, _ = pipeline.compute_keypoints(points, source, model)

@@ -16,7 +16,7 @@ from absl import flags
 import numpy as np
 
 from ssd_jax import cli
-from ssd_jax.data import io, kitti
+from ssd_jax.data import kitti
 from ssd_jax.registration import pipeline
 
 FLAGS = flags.FLAGS
@@ -35,12 +35,9 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   for seq in FLAGS.sequences:
-    try:
-      n, m, corr = kitti.process_sequence(
-          FLAGS.kitti_root, seq, FLAGS.out, FLAGS.spacing, FLAGS.pair_distance,
-          FLAGS.voxel_size, FLAGS.normal_radius, pipeline.refine_icp if FLAGS.icp else None)
-    except io.CloudFileError as e:
-      raise SystemExit(f'error: {e}') from None
+    n, m, corr = kitti.process_sequence(
+        FLAGS.kitti_root, seq, FLAGS.out, FLAGS.spacing, FLAGS.pair_distance,
+        FLAGS.voxel_size, FLAGS.normal_radius, pipeline.refine_icp if FLAGS.icp else None)
     line = f'sequence {seq}: {n} clouds, {m} pairs'
     if corr:
       dt = np.array([c['rte'] for c in corr])

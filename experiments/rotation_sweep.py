@@ -2,8 +2,8 @@ r"""Does a checkpoint hold over the whole circle? Turn a cloud about z in steps 
 compare every cluster with its turned self (orientation error, descriptor distance,
 self-match rate), for one or more checkpoints.
 
-    python -m experiments.rotation_sweep --checkpoint=ours=runs/cpu_robust \
-        --checkpoint=paper=runs/cpu_small --cloud=../shared/data/example/oxford_270.bin \
+    python -m experiments.rotation_sweep --checkpoint=ours=runs/ours \
+        --checkpoint=paper=runs/paper_small --cloud=../shared/data/example/oxford_270.bin \
         --out=runs/rotation_sweep
 """
 
@@ -36,19 +36,16 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
-  try:
-    points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
-    rng = np.random.default_rng(FLAGS.seed)
-    centers = points[rng.choice(len(points), min(FLAGS.num_centers, len(points)), replace=False)]
-    angles = list(range(0, 360, FLAGS.step_deg))
-    sweeps = {}
-    for spec in FLAGS.checkpoint:
-      name, sep, path = spec.partition('=')
-      if not sep:
-        raise ValueError(f'--checkpoint {spec!r} must be NAME=RUN_DIR')
-      sweeps[name] = orientation.rotation_sweep(pretrained.load(path), points, centers, angles)
-  except (ValueError, io.CloudFileError, FileNotFoundError) as e:
-    raise SystemExit(f'error: {e}') from None
+  points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
+  rng = np.random.default_rng(FLAGS.seed)
+  centers = points[rng.choice(len(points), min(FLAGS.num_centers, len(points)), replace=False)]
+  angles = list(range(0, 360, FLAGS.step_deg))
+  sweeps = {}
+  for spec in FLAGS.checkpoint:
+    name, sep, path = spec.partition('=')
+    if not sep:
+      raise ValueError(f'--checkpoint {spec!r} must be NAME=RUN_DIR')
+    sweeps[name] = orientation.rotation_sweep(pretrained.load(path), points, centers, angles)
   rows = [[name, f'{r["angle_deg"]:.0f}', tables.fmt(r['orientation_error_deg'], 1),
            tables.fmt(r['descriptor_distance'], 3), tables.fmt(100 * r['self_match_rate'], 1)]
           for name, sweep in sweeps.items() for r in sweep]

@@ -81,23 +81,20 @@ def main(argv):
                      'experiments.make_synthetic first)')
   sections, stats = [], {}
   kitti, oxford = (os.path.join(FLAGS.data, split) for split in ('test_kitti', 'test_oxford'))
-  try:
-    if os.path.isdir(kitti):
-      real_md, stats['realism_kitti'] = realism.compare_with_real(FLAGS.data, FLAGS.real,
-                                                                  FLAGS.scan_stride)
-      base_md, stats['baseline_kitti'], stats['pairs_kitti'] = baseline_table(
-          kitti, FLAGS.max_pairs, FLAGS.fpfh_max_nn, 'oxford', with_open3d=False)
-      sections += [f'## Synthetic vs real KITTI scans\n\n{real_md}',
-                   f'## ISS + FPFH + RANSAC on the synthetic KITTI-style pairs\n\n{base_md}']
-    if os.path.isdir(oxford):
-      real_md, stats['realism_oxford'] = realism.compare_oxford_with_real(
-          FLAGS.data, FLAGS.real, FLAGS.model_stride)
-      base_md, stats['baseline_oxford'], stats['pairs_oxford'] = baseline_table(
-          oxford, FLAGS.max_pairs, FLAGS.fpfh_max_nn, 'oxford', with_open3d=True)
-      sections += [f'## Synthetic vs real Oxford RobotCar test models\n\n{real_md}',
-                   f'## Baselines on the synthetic Oxford-style pairs\n\n{base_md}']
-  except (io.CloudFileError, FileNotFoundError, ValueError) as e:
-    raise SystemExit(f'error: {e}') from None
+  if os.path.isdir(kitti):
+    real_md, stats['realism_kitti'] = realism.compare_with_real(FLAGS.data, FLAGS.real,
+                                                                FLAGS.scan_stride)
+    base_md, stats['baseline_kitti'], stats['pairs_kitti'] = baseline_table(
+        kitti, FLAGS.max_pairs, FLAGS.fpfh_max_nn, 'oxford', with_open3d=False)
+    sections += [f'## Synthetic vs real KITTI scans\n\n{real_md}',
+                 f'## ISS + FPFH + RANSAC on the synthetic KITTI-style pairs\n\n{base_md}']
+  if os.path.isdir(oxford):
+    real_md, stats['realism_oxford'] = realism.compare_oxford_with_real(
+        FLAGS.data, FLAGS.real, FLAGS.model_stride)
+    base_md, stats['baseline_oxford'], stats['pairs_oxford'] = baseline_table(
+        oxford, FLAGS.max_pairs, FLAGS.fpfh_max_nn, 'oxford', with_open3d=True)
+    sections += [f'## Synthetic vs real Oxford RobotCar test models\n\n{real_md}',
+                 f'## Baselines on the synthetic Oxford-style pairs\n\n{base_md}']
   if not sections:
     raise SystemExit(f'error: {FLAGS.data} holds neither test_kitti/ nor test_oxford/')
   seconds = ', '.join(f'{row} {v["seconds"]:.0f} s for {v["pairs"]} pairs'

@@ -1,14 +1,14 @@
 r"""Train the self-supervised descriptor.
 
-    python -m experiments.train --config=configs/cpu_small.py --workdir=runs/small \
+    python -m experiments.train --config=configs/paper_small.py --workdir=runs/small \
         --config.data.path=../shared/data/kitti_object_velodyne
 
 Rerunning the same command resumes from the latest checkpoint in --workdir. The same
 command runs over several processes (README, "Many machines"), e.g. two on one host:
 
-    python -m experiments.train --config=configs/cpu_small.py --workdir=runs/two \
+    python -m experiments.train --config=configs/paper_small.py --workdir=runs/two \
         --coordinator_address=localhost:12355 --num_processes=2 --process_id=0 &
-    python -m experiments.train --config=configs/cpu_small.py --workdir=runs/two \
+    python -m experiments.train --config=configs/paper_small.py --workdir=runs/two \
         --coordinator_address=localhost:12355 --num_processes=2 --process_id=1
 """
 
@@ -23,9 +23,9 @@ from absl import flags
 from absl import logging
 import jax
 
-from ssd_jax import checkpoint, cli, config_checks, distributed, train
+from ssd_jax import cli, distributed, train
 from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.data import clean, io
+from ssd_jax.data import io
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Directory for checkpoints and metrics.jsonl.')
@@ -47,11 +47,8 @@ def main(argv):
     hint = ''
     if 'synthetic' in FLAGS.config.data.path and not os.path.exists(FLAGS.config.data.path):
       hint = ('\nthe synthetic set is made by: python -m experiments.make_synthetic '
-              '--config=configs/synthetic_small.py --out=data_cache/synthetic_small')
+              '--config=configs/data/synthetic_small.py --out=data_cache/synthetic_small')
     raise SystemExit(f'error: {e}{hint}') from None
-  except (config_checks.ConfigError, clean.CloudDataError, train.TrainingDiverged,
-          checkpoint.CheckpointError) as e:
-    raise SystemExit(f'error: {e}') from None
   except Exception as e:  # pylint: disable=broad-except
     if not distributed.is_peer_failure(e):
       raise

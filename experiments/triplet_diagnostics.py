@@ -1,9 +1,9 @@
 r"""What a triplet-trained checkpoint learned, and what its triplets offer at all.
 
-    python -m experiments.triplet_diagnostics --config=configs/feat3dnet_small.py:pretrain \
+    python -m experiments.triplet_diagnostics --config=configs/experiments/feat3dnet_small.py:pretrain \
         --workdir=runs/feat3dnet_small_pretrain
 
-On the trainer's fixed probe triplets (see `train.probe_triplets`), prints a Markdown
+On the trainer's fixed probe triplets (see `objective.probe_triplets`), prints a Markdown
 table: the untrained network and the checkpoint with the clouds as stored and with
 every cloud turned by its own random angle (Rotate1D), and FPFH (rotation invariant)
 as the reference point. For a model with a detector it also prints how well the
@@ -17,7 +17,7 @@ from absl import flags
 import jax
 import numpy as np
 
-from ssd_jax import cli, config_checks, inference, pretrained, train
+from ssd_jax import cli, config_checks, inference, objective, pretrained, train
 from ssd_jax.evaluation import orientation, triplets
 from ssd_jax.logging_utils import quiet_libraries
 
@@ -39,18 +39,15 @@ def main(argv):
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
   config = FLAGS.config
-  try:   # a missing checkpoint or train.txt, bad clouds: one line, no traceback
-    config_checks.check_config(config)
-    probe = train.probe_triplets(train.triplet_dataset(config), config)
-    trained = pretrained.load(FLAGS.workdir)
-    fresh = jax.device_get(train.create_train_state(config, jax.random.key(config.seed)))
-    untrained = inference.Model.from_config(
-        config, {'params': fresh.params, 'batch_stats': fresh.batch_stats})
-    if jax.tree.structure(trained.variables) != jax.tree.structure(untrained.variables):
-      raise ValueError(f'{FLAGS.workdir} holds a different network than --config describes '
-                       '(model.use_orientation, model.descriptor_dim); pass its training config')
-  except (ValueError, FileNotFoundError) as e:
-    raise SystemExit(f'error: {e}') from None
+  config_checks.check_config(config)
+  probe = objective.probe_triplets(train.triplet_dataset(config), config)
+  trained = pretrained.load(FLAGS.workdir)
+  fresh = jax.device_get(train.create_train_state(config, jax.random.key(config.seed)))
+  untrained = inference.Model.from_config(
+      config, {'params': fresh.params, 'batch_stats': fresh.batch_stats})
+  if jax.tree.structure(trained.variables) != jax.tree.structure(untrained.variables):
+    raise ValueError(f'{FLAGS.workdir} holds a different network than --config describes '
+                     '(model.use_orientation, model.descriptor_dim); pass its training config')
   models = (('untrained', untrained), (f'{FLAGS.workdir} (step {trained.step})', trained))
   rows = []
   for name, model in models:

@@ -179,3 +179,29 @@ def resample_branch(key: jax.Array, points: jax.Array, valid: jax.Array,
     sensor = fov_crop(k_fov, points, sensor, cfg.branch_fov_rate, tuple(cfg.branch_fov))
   enough = jnp.sum(sensor, axis=1, keepdims=True) >= MIN_BRANCH_POINTS
   return jnp.where(enough, sensor, valid)
+
+
+def self_supervised_branches(key: jax.Array, points: jax.Array, valid: jax.Array,
+                             cfg: ml_collections.ConfigDict):
+  """The paper's two branches of a batch of unlabeled clouds (docs/method.md §2): PC1 the
+  cloud, PC2 the cloud turned about z by R_gt (`self_rotate`), each jittered.
+
+  points [B, N, 3] metres (valid [B, N]); or [B, 2, N, 3] (valid [B, 2, N]), each cloud
+  beside a second view of it in its own frame (`datasets.RescanPairDataset`), which PC2
+  turns instead of the cloud itself. Each branch may keep its own subset of the points
+  (`resample_branch`; the paper: both keep all). The draws come from
+  `jax.random.split(key, 5)[:3]` and `fold_in(key, 1)`: the loss draws its centres from
+  the same split. -> (pc1 [B, N, 3], valid1 [B, N], pc2, valid2, r_gt [B, 3, 3])."""
+  k_rot, k_jit1, k_jit2, _, _ = jax.random.split(key, 5)
+  k_res1, k_res2 = jax.random.split(jax.random.fold_in(key, 1))
+  if points.ndim == 4:
+    view1, view2, seen1, seen2 = points[:, 0], points[:, 1], valid[:, 0], valid[:, 1]
+  else:
+    view1 = view2 = points
+    seen1 = seen2 = valid
+  pc2, r_gt = self_rotate(k_rot, view2, cfg.rotation_sigma, cfg.rotation_clip,
+                          cfg.self_rotation)
+  pc1 = jitter(k_jit1, view1, cfg.jitter_sigma, cfg.jitter_clip)
+  pc2 = jitter(k_jit2, pc2, cfg.jitter_sigma, cfg.jitter_clip)
+  return (pc1, resample_branch(k_res1, view1, seen1, cfg), pc2,
+          resample_branch(k_res2, view2, seen2, cfg), r_gt)

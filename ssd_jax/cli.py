@@ -16,8 +16,9 @@ from absl import app
 from absl import flags
 import jax
 from ml_collections import config_flags
+from tqdm import auto as tqdm
 
-from ssd_jax import distributed
+from ssd_jax import distributed, errors, library_text
 
 
 _CONFIG_FLAGS: set[str] = set()   # names of the flags defined by define_config_file
@@ -67,14 +68,14 @@ def parse_flags(argv: Sequence[str]) -> list[str]:
       getattr(getattr(flags.FLAGS, name), 'keys', None)
     return rest
   except OSError as e:   # a --config file that is missing or does not load
-    message = _one_line(str(e)).replace('Failed loading config file config_config ', '')
+    message = _one_line(str(e))
   except flags.Error as e:
     lines = [l for l in str(e).splitlines() if l.strip()]
     # A config file that raises: the flag and the exception, not the traceback between.
     message = _one_line(lines[0] + ' ' + lines[-1] if len(lines) > 2 else str(e))
   except (AttributeError, KeyError, TypeError, ValueError) as e:
     message = _override_message(e, argv)
-  _exit(message)
+  _exit(library_text.config_load_error(message))
 
 
 def _override_message(error: Exception, argv: Sequence[str]) -> str:
@@ -130,19 +131,32 @@ def enable_compilation_cache(directory: str) -> None:
   jax.config.update('jax_persistent_cache_min_entry_size_bytes', 0)
 
 
+def one_line_errors(main: Callable[[list[str]], None]) -> Callable[[list[str]], None]:
+  """main, with the `errors.REPORTED` errors it raises (bad input: `errors.UserError`, and
+  a library's ValueError or FileNotFoundError) ended as 'error: <message>' and exit
+  status 1 (SystemExit), every other exception left as it is."""
+  def wrapped(argv):
+    try:
+      return main(argv)
+    except errors.REPORTED as e:
+      raise SystemExit(f'error: {library_text.config_load_error(str(e))}') from None
+  return wrapped
+
+
 def run(main: Callable[[list[str]], None], fast_exit: bool = False) -> None:
-  """`absl.app.run(main)` with `parse_flags`, and the compilation cache on.
+  """`absl.app.run(main)` with `parse_flags`, and the compilation cache on; the
+  `errors.REPORTED` errors of main end in one line, 'error: ...', and exit status 1.
 
   fast_exit: once main has succeeded, run the atexit hooks, flush, and end the process
   without the interpreter's teardown. Freeing the modules and objects of JAX, XLA and
   Open3D takes ~0.6 s on the 2-core VM, a sixth of a one-pair `register`
-  (docs/benchmarks.md). Only for commands whose results are in closed files and
+  (docs/notes/benchmarks.md). Only for commands whose results are in closed files and
   flushed streams when main returns; a failure, or a non-daemon thread still running,
   exits the usual way.
   """
   def with_cache(argv):
     enable_compilation_cache(flags.FLAGS.compilation_cache)
-    return main(argv)
+    return one_line_errors(main)(argv)
   try:
     app.run(with_cache, flags_parser=parse_flags)
   except SystemExit as e:
@@ -164,6 +178,43 @@ def _exit_without_teardown() -> None:
   if os.name == 'posix':   # the C library of the process itself, as dlopen(NULL) gives it
     ctypes.CDLL(None).fflush(None)   # C/C++ libraries' buffered stdout (Open3D's messages)
   os._exit(0)
+
+
+def check_writable(path: str | None) -> None:
+  """Create an output file's folder now, so that a bad path fails before the work."""
+  if not path:
+    return
+  folder = os.path.dirname(os.path.abspath(path))
+  try:
+    os.makedirs(folder, exist_ok=True)
+  except OSError as e:
+    raise errors.UserError(f'cannot create the folder of {path}: {e.strerror}') from None
+  if os.path.isdir(path) or not os.access(folder, os.W_OK):
+    raise errors.UserError(f'{path}: cannot write a file there')
+
+
+class StageBar:
+  """A one-line progress bar of a command's stages on stderr (`enabled`: e.g. when stderr
+  is a terminal): `stage(name)` as each starts, `say(line)` prints above the bar."""
+
+  def __init__(self, total: int, enabled: bool, name: str):
+    self._bar = tqdm.tqdm(total=total, unit='stage', leave=False, disable=not enabled,
+                          bar_format=name + ' {n}/{total} [{elapsed}] {desc}')
+
+  def stage(self, name: str) -> None:
+    self._bar.set_description_str(name, refresh=False)
+    self._bar.update(1)
+    self._bar.refresh()   # update() redraws at most every 0.1 s: show a long stage's name
+
+  def say(self, line: str) -> None:
+    (print if self._bar.disable else self._bar.write)(line)
+
+  def clear(self) -> None:
+    """Off the screen until the next stage (which redraws it below what was printed)."""
+    self._bar.clear()
+
+  def close(self) -> None:
+    self._bar.close()
 
 
 def define_distributed_flags() -> None:

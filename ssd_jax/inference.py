@@ -1,7 +1,9 @@
 """Inference: descriptors at keypoints and attention keypoints of whole clouds.
 
     model = inference.load(checkpoint_dir)                       # or inference.Model(...)
-    desc = inference.describe(model, cloud, keypoint_xyz)         # [K, D]
+    desc = inference.describe(model, cloud, keypoint_xyz)         # [K, D], host-side
+    f = inference.describe_fn(model)                              # the same, pure JAX:
+    desc = jax.jit(jax.vmap(f))(clouds, keypoints, valid)         # [B, N, 3] -> [B, K, D]
     kp_idx, attention = inference.detect(model, cloud)            # 3DFeat-Net keypoints
 
 The network runs jitted on clusters of a fixed chunk size (the last chunk is
@@ -12,7 +14,7 @@ bucket. Neighbourhoods are PointNet++ ball queries (the first c
 points within r in index order, padded by repeating the first). Two paths give
 identical results:
   * 'kdtree': a host KD-tree (scipy) finds the neighbours, far faster on CPU for
-    large clouds (docs/benchmarks.md);
+    large clouds (docs/notes/benchmarks.md);
   * 'dense': `grouping.ball_query` in JAX, a dense [chunk, N] distance matrix,
     with the cloud padded to a power-of-two bucket.
 Clouds are put in a seeded random order first, so that "first c in index
@@ -123,7 +125,7 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
 
 # XLA:CPU hands dots, elementwise ops and reductions to YNNPACK one by one with this
 # setting; its default groups the whole descriptor branch of a 256-cluster chunk into
-# one library fusion that ran 1.4x slower on the 2-core VM (docs/benchmarks.md).
+# one library fusion that ran 1.4x slower on the 2-core VM (docs/notes/benchmarks.md).
 _CPU_COMPILER_OPTIONS = {'xla_cpu_experimental_ynn_fusion_type': ','.join(
     f'LIBRARY_FUSION_TYPE_{kind}' for kind in ('DOT', 'ELTWISE', 'REDUCE'))}
 
@@ -158,6 +160,49 @@ def _network_kernel():
 @functools.partial(jax.jit, static_argnames=('radius', 'num_samples'))
 def _dense_neighbourhoods(points, valid, centers, *, radius, num_samples):
   return grouping.ball_query(points, centers, radius, num_samples, valid)
+
+
+def describe_fn(model: Model, shuffle: bool = True):
+  """`describe` as a pure JAX function, for use inside other JAX code.
+
+  Returns f(points [N, 3], keypoints [K, 3], valid [N] bool = None, key = None) ->
+  [K, D] float32, L2-normalised descriptors at the keypoints (metres; invalid rows of
+  points, e.g. padding, are never grouped). Ball query, grouping, the network and the
+  average over `model.draws` samplings all run in JAX with static shapes, so f works
+  under `jax.jit`, `jax.vmap` (a batch of padded clouds) and `jax.lax` loops:
+
+      f = inference.describe_fn(pretrained.load('ours'))
+      desc = jax.jit(jax.vmap(f))(points, keypoints, valid)   # [B, N, 3], [B, K, 3], [B, N]
+
+  A ball holds hundreds of points of a 0.2 m-voxel scan and a cluster c of them: with
+  `shuffle` each draw takes the first c in a random order of the cloud drawn from `key`
+  (default `jax.random.key(0)`; draw j uses `fold_in(key, j)`), a random sample of the
+  ball as in training; without, the first c in the points' own order (`describe` of
+  the same points in the order it draws with numpy, to the float rounding: tested).
+  Memory is O(K N) (a dense ball query): chunk the keypoints of very large clouds.
+  """
+  def one_draw(points, keypoints, valid):
+    idx, has = grouping.ball_query(points, keypoints, model.radius, model.num_samples, valid)
+    clusters = grouping.group_points(points, keypoints, idx, has, model.radius)
+    return model.net.apply(model.variables, clusters, train=False)[0]
+
+  def describe_points(points: jax.Array, keypoints: jax.Array, valid: jax.Array | None = None,
+                      key: jax.Array | None = None) -> jax.Array:
+    points = jnp.asarray(points, jnp.float32)
+    keypoints = jnp.asarray(keypoints, jnp.float32)
+    valid = jnp.ones(points.shape[:1], bool) if valid is None else jnp.asarray(valid, bool)
+    if not shuffle:
+      return one_draw(points, keypoints, valid)
+    key = jax.random.key(0) if key is None else key
+    total = 0.0
+    for draw in range(model.draws):
+      order = jax.random.permutation(jax.random.fold_in(key, draw), points.shape[0])
+      total = total + one_draw(points[order], keypoints, valid[order])
+    if model.draws == 1:
+      return total
+    return total * jax.lax.rsqrt(jnp.sum(total * total, -1, keepdims=True) + 1e-24)
+
+  return describe_points
 
 
 def neighbourhoods(model: Model, points: np.ndarray, keypoints: np.ndarray,

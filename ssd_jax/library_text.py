@@ -12,6 +12,7 @@ test makes the library produce the real text and checks the pattern still matche
 | `PEER_FAILURE` | gloo, NCCL, JAX's coordination service | `test_distributed.py::test_a_killed_process_stops_the_run_and_the_rerun_resumes` |
 | `is_failed_array_read` | orbax, tensorstore | `test_checkpoint.py::test_damaged_newest_checkpoint_falls_back_or_is_named` |
 | `first_line` | orbax, tensorstore | the same |
+| `config_load_error` | ml_collections | `test_cli.py::test_cli_mistakes_end_in_one_line` |
 """
 
 from __future__ import annotations
@@ -23,6 +24,20 @@ import re
 # errors. ... absl::Status: DEADLINE_EXCEEDED: ...".
 _JAX_FATAL = re.compile(r'^F\d{4} .*(Terminating process because the JAX distributed service'
                         r'.*?)(absl::Status: (.*))?$')
+
+# ml_collections' prefixes of a --config file that does not load, before the file's own
+# error, in any order: "Configuration is not available because of an earlier failure to
+# load: ", "Failed loading config file config_config ", "Attempted [Relative path]: ".
+_CONFIG_LOAD_PREFIX = re.compile(r'^(?:Failed loading config file \S+ |Configuration is not '
+                                 r'available because of an earlier failure to load: |'
+                                 r'Attempted \[[^\]]*\]: )+')
+
+
+def config_load_error(message: str) -> str:
+  """ml_collections' one-line message for a --config file that does not load -> the
+  file's own error (e.g. "configs/x.py [Errno 2] No such file or directory: ...")."""
+  return _CONFIG_LOAD_PREFIX.sub('', message)
+
 
 # What a collective or a coordination call says when its peer process is gone.
 PEER_FAILURE = ('Gloo', 'NCCL', 'Connection reset', 'Connection closed', 'DEADLINE_EXCEEDED',

@@ -10,7 +10,7 @@ An export is a folder with three files:
 The shipped ones live in `ssd_jax/weights/<name>/` and are named by `SHIPPED`:
 
     model = pretrained.load('ours')              # shipped: the best self-supervised model
-    model = pretrained.load('runs/cpu_robust')   # a training run (its latest checkpoint)
+    model = pretrained.load('runs/ours')   # a training run (its latest checkpoint)
     model = pretrained.load('exports/mine')      # an export folder
 """
 
@@ -30,9 +30,9 @@ from ssd_jax import config_upgrade, errors, inference, network
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / 'weights'
 SHIPPED = {
-    'ours': 'self-supervised descriptor (configs/cpu_robust.py)',
-    'ours_detector': 'self-supervised descriptor and detector (configs/cpu_robust_detector.py)',
-    'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/feat3dnet_small_varied.py)',
+    'ours': 'self-supervised descriptor (configs/ours.py)',
+    'ours_detector': 'self-supervised descriptor and detector (configs/ours_detector.py)',
+    'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/feat3dnet.py)',
 }
 CONFIG_FILE, WEIGHTS_FILE, CARD_FILE = 'config.json', 'weights.msgpack', 'MODEL_CARD.md'
 

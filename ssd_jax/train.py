@@ -23,19 +23,13 @@ import numpy as np
 import optax
 from tqdm import auto as tqdm
 
-from ssd_jax import checkpoint, config_checks, distributed, network, objective, pretrained
+from ssd_jax import checkpoint, config_checks, distributed, errors, network, objective, pretrained
 from ssd_jax.config_checks import ConfigError
 from ssd_jax.data import datasets
 
 
-# The triplet objective's fixed probe: this many training-size batches of triplets. Under
-# Rotate1D, 8 triplets with one draw of turns and centres moved a checkpoint's probe loss
-# by +-0.03 from one draw to the next, more than the training changed it.
-PROBE_BATCHES = 32
-
-
-class TrainingDiverged(FloatingPointError):
-  """The loss or the gradient became NaN/Inf."""
+class TrainingDiverged(errors.UserError, FloatingPointError):
+  """The loss or the gradient became NaN/Inf (a setting to change: one line, as bad input)."""
 
 
 @flax.struct.dataclass
@@ -124,19 +118,11 @@ def eval_step(state: TrainState, points: jax.Array, key: jax.Array, *, model: ne
 
 def probe_step(state: TrainState, triplets: jax.Array, key: jax.Array, *,
                model: network.FeatureNet, config: ml_collections.ConfigDict) -> dict[str, jax.Array]:
-  """Mean triplet metrics of fixed triplets [M * B, 3, N, 3] metres (B the training batch
-  size), with running BatchNorm statistics: one batch of B at a time, so the memory is a
-  training batch's, and each batch with its own draw of augmentations and centres."""
-  b = config.train.batch_size
-  if triplets.shape[0] % b:
-    raise ValueError(f'probe_step: {triplets.shape[0]} triplets is not a multiple of the '
-                     f'training batch size {b}')
-  batches = triplets.reshape(-1, b, *triplets.shape[1:])
-  keys = jax.random.split(key, batches.shape[0])
-  per_batch = jax.lax.map(
-      lambda xs: eval_step(state, xs[0], xs[1], model=model, config=config,
-                           objective_name='triplet'), (batches, keys))
-  return jax.tree.map(lambda v: jnp.mean(v, 0), per_batch)
+  """`objective.triplet_probe` of fixed triplets [M * B, 3, N, 3] with the state's
+  weights and running BatchNorm statistics (B the training batch size)."""
+  variables = {'params': state.params, 'batch_stats': state.batch_stats}
+  return objective.triplet_probe(model, variables, key, triplets, config.model,
+                                 config.train.batch_size)
 
 
 def make_mesh(devices=None) -> jax.sharding.Mesh:
@@ -258,13 +244,6 @@ def triplet_dataset(config: ml_collections.ConfigDict) -> datasets.TripletDatase
                                  min_points=config.data.min_points)
 
 
-def probe_triplets(dataset: datasets.TripletDataset,
-                   config: ml_collections.ConfigDict) -> np.ndarray:
-  """The triplet objective's fixed probe: [batch_size * PROBE_BATCHES, 3, N, 3] metres."""
-  return dataset.batch(config.seed + 1, 0, config.train.batch_size * PROBE_BATCHES,
-                       config.data.num_points)
-
-
 def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> TrainState:
   """Train (or resume) `config` in `workdir`; returns the final state.
 
@@ -321,7 +300,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
   # triplets, augmentations and centers at every evaluation are not.
   probe_points, probe_fn = None, None
   if config.objective == 'triplet':
-    probe_points = probe_triplets(dataset, config)
+    probe_points = objective.probe_triplets(dataset, config)
     probe_fn = jax.jit(lambda s, p: probe_step(s, p, jax.random.key(config.seed + 2),
                                                model=create_model(config), config=config))
 

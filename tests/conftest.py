@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from ssd_jax import cli
-from ssd_jax.configs import cpu_small, synthetic
+from ssd_jax.configs import paper_small
+from ssd_jax.configs.data import synthetic
 from ssd_jax.synthetic import dataset
 
 # The tests in this process load what an earlier one compiled, as the commands they start
@@ -62,8 +63,8 @@ def tiny_config():
 
 
 def tiny_config_dict():
-  """cpu_small shrunk so one jitted step takes well under a second on 2 cores."""
-  config = cpu_small.get_config()
+  """paper_small shrunk so one jitted step takes well under a second on 2 cores."""
+  config = paper_small.get_config()
   config.progress_bar = False
   config.data.path = ''        # each test names its data
   config.data.eval_path = ''

@@ -36,8 +36,9 @@ def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_pat
                        adapted.variables['params'], ours.variables['params'])
   assert 0 < max(jax.tree.leaves(moved)) < 0.05
   pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
-  reg, _, _ = pipeline.register(io.read_cloud(pair.cloud1), io.read_cloud(pair.cloud2), 'iss',
-                                'learned', adapted)
+  reg, _, _ = pipeline.register(target=io.read_cloud(pair.cloud1),
+                                source=io.read_cloud(pair.cloud2), model=adapted,
+                                options=pipeline.Options.paper('learned'))
   assert metrics.registration_errors(pair.transform, reg.transform)['success']
 
 

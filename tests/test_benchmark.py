@@ -15,12 +15,12 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 def test_train_step_benchmark_times_a_compiled_step():
   """One config's row, as the parent process collects it: a positive step time and the
   analytic FLOP count of `forward_flops` (3 x forward), beside XLA's own count."""
-  out = subprocess.run([sys.executable, '-m', 'experiments.benchmark', '--child=cpu_small',
+  out = subprocess.run([sys.executable, '-m', 'experiments.benchmark', '--child=paper_small',
                         '--steps=1', '--breakdown=false'],
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
   assert out.returncode == 0, out.stderr[-3000:]
   row = json.loads([l for l in out.stdout.splitlines() if l.startswith('RESULT ')][-1][7:])
-  assert row['config'] == 'cpu_small' and row['batch'] == 2 and row['points'] == 2048
+  assert row['config'] == 'paper_small' and row['batch'] == 2 and row['points'] == 2048
   assert 0 < row['step_s'] < 60 and row['compile_s'] > 0
   # 2 x 2 clouds x 256 clusters x 32 points through the dense layers, three times over.
   assert abs(row['train_gflop'] - 12.0) < 0.1

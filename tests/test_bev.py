@@ -105,9 +105,6 @@ def test_verification_with_bev_candidates_registers_where_every_ransac_pose_is_w
   assert len(verified.verified_fitness) == 6 and verified.seconds['bev'] > 0
   err = metrics.registration_errors(t_true, verified.transform)
   assert err['rte'] < 0.1 and err['rre_geodesic'] < 0.3, err
-  with pytest.raises(ValueError, match='needs the upright estimator'):
-    pipeline.register(cloud1, cloud2, 'auto', 'fpfh', estimator='rigid', verify_candidates=1,
-                      bev_candidates=3)
 
 
 @pytest.mark.real_data

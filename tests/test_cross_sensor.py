@@ -10,8 +10,8 @@ import pytest
 from scipy import spatial
 
 from ssd_jax import sensors
-from ssd_jax.configs import cross_sensor as cross_sensor_eval
-from ssd_jax.configs import cross_sensor_data
+from ssd_jax.configs.evals import cross_sensor as cross_sensor_eval
+from ssd_jax.configs.data import cross_sensor as cross_sensor_data
 from ssd_jax.data import io, registration_sets, rescan
 from ssd_jax.evaluation import evaluators, feature_store
 from ssd_jax.synthetic import cross_sensor, dataset

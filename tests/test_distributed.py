@@ -16,7 +16,7 @@ from ssd_jax import distributed
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-TINY_TRAIN = ['--config=configs/cpu_small.py', '--config.data.num_points=512',
+TINY_TRAIN = ['--config=configs/paper_small.py', '--config.data.num_points=512',
               '--config.model.num_clusters=64', '--config.model.num_samples=16',
               '--config.train.batch_size=2', '--config.train.log_every=1',
               '--config.train.eval_every=2', '--config.train.checkpoint_every=2',
@@ -113,7 +113,7 @@ def test_two_processes_train_like_one_and_share_checkpoints(synthetic_root, tmp_
 
 @pytest.mark.slow
 def test_evaluation_split_over_two_processes_writes_the_same_table(synthetic_root, tmp_path):
-  args = ['--config=configs/registration.py', f'--config.data_root={synthetic_root}',
+  args = ['--config=configs/evals/registration.py', f'--config.data_root={synthetic_root}',
           '--config.evals.registration.dataset=test_kitti', '--config.max_pairs=3',
           "--config.rows=('iss+fpfh','iss+ours')", '--config.fpfh_max_nn=200']
   _run('experiments.evaluate', args + [f'--workdir={tmp_path / "one"}'])

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from ssd_jax import errors, geometry, inference, pretrained, train
-from ssd_jax.configs import cpu_small
-from ssd_jax.configs import registration as registration_config
+from ssd_jax.configs import paper_small
+from ssd_jax.configs.evals import registration as registration_config
 from ssd_jax.data import clusters, io, registration_sets
 from ssd_jax.registration import bev, features, pipeline, verification
 from ssd_jax.evaluation import (descriptor_matching, evaluators, feature_store, fingerprint,
@@ -116,7 +116,7 @@ def test_precision_of_perfect_and_random_descriptors():
 # ---- learned descriptors of many clusters at once -----------------------------------------
 
 def test_describe_clusters_equals_describe_per_cluster():
-  config = cpu_small.get_config()
+  config = paper_small.get_config()
   config.model.num_samples = 16
   state = train.create_train_state(config, jax.random.key(0))
   model = inference.Model.from_config(config, {'params': state.params,
@@ -247,7 +247,7 @@ def test_reproduce_says_what_it_cannot_do(tmp_path):
 
 @pytest.mark.multiprocess
 def test_evaluate_names_a_bad_type_and_missing_data(tmp_path):
-  common = [sys.executable, '-m', 'experiments.evaluate', '--config=configs/registration.py',
+  common = [sys.executable, '-m', 'experiments.evaluate', '--config=configs/evals/registration.py',
             f'--workdir={tmp_path / "out"}']
   run = subprocess.run(common + ['--config.evals.registration.type=tables'], cwd=ROOT,
                        capture_output=True, text=True, timeout=300)
@@ -293,7 +293,7 @@ def test_descriptor_matching_cli_names_a_truncated_cluster(tmp_path):
   (tmp_path / '0_1.bin').write_bytes(good.tobytes()[:-5])
   (tmp_path / 'filenames.txt').write_text('pair label\n0 1\n')
   run = subprocess.run([sys.executable, '-m', 'experiments.evaluate',
-                        '--config=configs/descriptor_matching.py', f'--workdir={tmp_path / "out"}',
+                        '--config=configs/evals/descriptor_matching.py', f'--workdir={tmp_path / "out"}',
                         f'--config.evals.descriptor_matching.clusters={tmp_path}',
                         "--config.evals.descriptor_matching.descriptors=('fpfh',)"],
                        cwd=ROOT, capture_output=True,

@@ -14,7 +14,8 @@ import pytest
 from scipy import spatial
 
 from ssd_jax import augment, config_checks, geometry, inference, objective, train
-from ssd_jax.configs import cpu_robust, feat3dnet_robust
+from ssd_jax.configs import ours as ours_config
+from ssd_jax.configs import feat3dnet as feat3dnet_config
 from ssd_jax.data import clean, datasets, io, kitti
 from ssd_jax.evaluation import orientation, repeatability, triplets
 
@@ -146,7 +147,7 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
   assert sorted(probes) == [0, 2]
   # Step 0's probe is the untrained state's triplet loss on the fixed probe triplets.
   data = datasets.TripletDataset(pre.data.path, min_points=pre.data.min_points)
-  probe = data.batch(pre.seed + 1, 0, pre.train.batch_size * train.PROBE_BATCHES,
+  probe = data.batch(pre.seed + 1, 0, pre.train.batch_size * objective.PROBE_BATCHES,
                      pre.data.num_points)
   untrained = train.create_train_state(pre, jax.random.key(pre.seed))
   model = train.create_model(pre)
@@ -155,11 +156,11 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
   assert probes[0] == pytest.approx(float(expected['loss']), rel=1e-5)
   # ... the mean over its batches, each with its own draw of augmentations and centres.
   b = pre.train.batch_size
-  keys = jax.random.split(jax.random.key(pre.seed + 2), train.PROBE_BATCHES)
+  keys = jax.random.split(jax.random.key(pre.seed + 2), objective.PROBE_BATCHES)
   one_batch = jax.jit(lambda p, k: train.eval_step(untrained, p, k, model=model, config=pre,
                                                    objective_name='triplet')['loss'])
   per_batch = [float(one_batch(jnp.asarray(probe[i * b:(i + 1) * b]), keys[i]))
-               for i in range(train.PROBE_BATCHES)]
+               for i in range(objective.PROBE_BATCHES)]
   assert probes[0] == pytest.approx(np.mean(per_batch), rel=1e-4)
   assert np.std(per_batch) > 1e-3   # the draws differ
   with pytest.raises(ValueError, match='not a multiple of the training batch size'):
@@ -266,7 +267,7 @@ def test_turn_clouds_turns_each_cloud_about_z_within_range():
 @pytest.mark.multiprocess
 def test_triplet_diagnostics_cli_names_a_missing_checkpoint(synthetic_root, tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.triplet_diagnostics',
-                        '--config=configs/feat3dnet_small.py:pretrain',
+                        '--config=configs/experiments/feat3dnet_small.py:pretrain',
                         f'--config.data.path={synthetic_root / "train"}',
                         f'--workdir={tmp_path / "none"}'],
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
@@ -360,9 +361,9 @@ def test_triplet_loss_reaches_the_orientation_head_in_stage_2(tiny_config, head)
 
 
 def test_architecture_matched_baseline_shares_ours_network_and_budget():
-  """configs/feat3dnet_robust.py trains `ours`' network (configs/cpu_robust.py) on the same
+  """configs/feat3dnet.py trains `ours`' network (configs/ours.py) on the same
   clouds for the same steps; only the objective and its augmentations differ."""
-  ours, baseline = cpu_robust.get_config(), feat3dnet_robust.get_config()
+  ours, baseline = ours_config.get_config(), feat3dnet_config.get_config()
   assert baseline.objective == 'triplet' and ours.objective != 'triplet'
   for key in ('radius', 'orientation_head', 'num_clusters', 'num_samples', 'descriptor_dim'):
     assert baseline.model[key] == ours.model[key], key
@@ -372,4 +373,4 @@ def test_architecture_matched_baseline_shares_ours_network_and_budget():
   assert baseline.inference.to_dict() == ours.inference.to_dict()
   assert 'rotate_1d' in baseline.model.augmentations
   config_checks.check_config(baseline)
-  config_checks.check_config(feat3dnet_robust.get_config('pretrain'))
+  config_checks.check_config(feat3dnet_config.get_config('pretrain'))

@@ -9,14 +9,14 @@ import pytest
 from scipy import spatial
 
 from ssd_jax import grouping, inference, network, train
-from ssd_jax.configs import cpu_small
+from ssd_jax.configs import paper_small
 from ssd_jax.data import io
 from tests.conftest import shared_path
 
 
 @pytest.fixture(scope='module')
 def model():
-  config = cpu_small.get_config()
+  config = paper_small.get_config()
   config.model.num_samples = 16
   state = train.create_train_state(config, jax.random.key(0))
   return inference.Model.from_config(config, {'params': state.params,
@@ -187,7 +187,7 @@ def test_descriptors_averaged_over_draws(model):
 
 
 def test_restored_weights_must_fit_the_configured_network():
-  config = cpu_small.get_config()
+  config = paper_small.get_config()
   template = network.variables_template(config.model)
   variables = jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), template)
   kept = inference.check_variables({**variables, 'opt_state': 1}, config.model, 'run/7')
@@ -213,3 +213,60 @@ def test_one_draw_finds_the_clusters_of_every_ball_from_the_shuffled_clouds_pref
     found = inference._first_in_prefix(points, centers, radius, perm, 64)
     np.testing.assert_array_equal(found[0], expected[0])
     np.testing.assert_array_equal(found[1], expected[1])
+
+
+def test_describe_fn_is_describe_in_pure_jax(model):
+  """Without shuffling, the pure function on the points in `describe`'s own random order
+  gives `describe`'s descriptors; with it, under jit and vmap over padded clouds, it
+  traces once and padding changes nothing."""
+  import chex  # pylint: disable=g-import-not-at-top
+  rng = np.random.default_rng(3)
+  pts = _cloud(rng, 3000)
+  kp = pts[rng.choice(len(pts), 100, replace=False)]
+  perm = inference._permutation(len(pts), 0)
+  plain = inference.describe_fn(model, shuffle=False)
+  np.testing.assert_allclose(np.asarray(jax.jit(plain)(pts[perm], kp)),
+                             inference.describe(model, pts, kp), atol=2e-5)
+
+  f = inference.describe_fn(model)
+  batched = jax.jit(jax.vmap(chex.assert_max_traces(f, n=1)))
+  other = _cloud(rng, 2500)
+  clouds = np.zeros((2, 3000, 3), np.float32)
+  clouds[0], clouds[1, :2500] = pts, other
+  valid = np.arange(3000)[None] < np.array([[3000], [2500]])
+  keypoints = np.stack([kp, other[:100]])
+  keys = jax.random.split(jax.random.key(5), 2)
+  out = np.asarray(batched(clouds, keypoints, valid, keys))
+  assert out.shape == (2, 100, 32)
+  np.testing.assert_allclose(np.linalg.norm(out, axis=-1), 1.0, atol=1e-5)
+  alone = np.asarray(jax.jit(f)(other, other[:100], None, keys[1]))
+  # A permutation of 2,500 real points and one of them padded to 3,000 differ, so the
+  # clusters are other samples of the same balls: close, not equal.
+  assert np.mean(np.sum(out[1] * alone, -1)) > 0.9
+  batched(clouds + 1.0, keypoints + 1.0, valid, keys)   # new values, no new trace
+
+
+def test_describe_fn_of_the_shipped_model_matches_a_scan_to_its_turned_copy():
+  """jit(vmap(describe_fn(ours))) on a real scan and its copy turned about z matches the
+  keypoints as `describe` does (its descriptors' nearest neighbours), each scan's balls
+  sampled by its own draws."""
+  from ssd_jax import pretrained  # pylint: disable=g-import-not-at-top
+  from ssd_jax.registration import keypoints as keypoints_lib, pipeline  # pylint: disable=g-import-not-at-top
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin'))
+  points, _ = pipeline.to_grid(scan.astype(np.float32), 0.2)
+  model = pretrained.load('ours')
+  kp = points[keypoints_lib.farthest_point_keypoints(points, 256)]
+  angle = np.deg2rad(70.0)
+  rot = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
+                  [0, 0, 1]], np.float32)
+  clouds, keypoints = np.stack([points, points @ rot.T]), np.stack([kp, kp @ rot.T])
+  keys = jax.random.split(jax.random.key(0), 2)   # each scan its own samplings
+  out = np.asarray(jax.jit(jax.vmap(inference.describe_fn(model)))(clouds, keypoints, None, keys))
+
+  def matched(d1, d2):
+    return np.mean(np.argmax(d1 @ d2.T, axis=1) == np.arange(len(d1)))
+
+  ours = matched(out[0], out[1])
+  host = matched(inference.describe(model, clouds[0], keypoints[0]),
+                 inference.describe(model, clouds[1], keypoints[1], seed=1))
+  assert ours > 0.5 and abs(ours - host) < 0.1, (ours, host)

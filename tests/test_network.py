@@ -5,7 +5,7 @@ import numpy as np
 import optax
 import pytest
 
-from ssd_jax import geometry, grouping, network
+from ssd_jax import geometry, grouping, layers, network
 from ssd_jax.evaluation import orientation
 
 
@@ -68,15 +68,15 @@ def test_batch_norm_relu_matches_autodiff_of_textbook_formula():
 
   def reference(x, scale, bias):
     mean, var = jnp.mean(x, 0), jnp.var(x, 0)
-    return jax.nn.relu((x - mean) / jnp.sqrt(var + network.BN_EPSILON) * scale + bias)
+    return jax.nn.relu((x - mean) / jnp.sqrt(var + layers.BN_EPSILON) * scale + bias)
 
-  fused = lambda *a: network.batch_norm_relu(*a)[0]
+  fused = lambda *a: layers.batch_norm_relu(*a)[0]
   np.testing.assert_allclose(fused(x, scale, bias), reference(x, scale, bias), atol=1e-5)
   g_fused = jax.grad(lambda *a: jnp.sum(fused(*a) * ct), argnums=(0, 1, 2))(x, scale, bias)
   g_ref = jax.grad(lambda *a: jnp.sum(reference(*a) * ct), argnums=(0, 1, 2))(x, scale, bias)
   for a, b in zip(g_fused, g_ref):
     np.testing.assert_allclose(a, b, atol=1e-4, rtol=1e-4)
-  _, mean, var = network.batch_norm_relu(x, scale, bias)
+  _, mean, var = layers.batch_norm_relu(x, scale, bias)
   np.testing.assert_allclose(var, jnp.var(x, 0), rtol=1e-4)
 
 
@@ -192,7 +192,7 @@ def test_broadcast_dense_equals_dense_on_the_concatenation():
   rng = np.random.default_rng(0)
   x = jnp.asarray(rng.normal(size=(2, 3, 5, 4)), jnp.float32)     # [B, k, c, A]
   g = jnp.asarray(rng.normal(size=(2, 3, 6)), jnp.float32)        # [B, k, B']
-  layer = network.BroadcastDense(7)
+  layer = layers.BroadcastDense(7)
   params = layer.init(jax.random.key(0), x, g)
   concat = jnp.concatenate([x, jnp.broadcast_to(g[..., None, :], (2, 3, 5, 6))], -1)
   dense = nn.Dense(7)

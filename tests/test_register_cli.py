@@ -71,7 +71,7 @@ def test_register_cli_errors(tiny_set, tmp_path):
   assert 'Traceback' not in out.stderr
   out = _run('experiments.register', f'--cloud1={cloud}', f'--cloud2={cloud}',
              '--descriptor=learned', '--draws=-2')
-  assert out.returncode != 0 and '--draws must be >= 0, got -2' in out.stderr
+  assert out.returncode != 0 and "draws must be >= 0 (0: the model's own), got -2" in out.stderr
   assert 'Traceback' not in out.stderr
   # An output path that cannot be written fails before the work, not after it.
   (tmp_path / 'a_file').write_text('')
@@ -160,12 +160,13 @@ _FUZZ_DRIVER = '''
 import json, sys
 from absl import flags
 from experiments import register
+from ssd_jax import cli
 results = []
 for args in json.loads(sys.argv[1]):
   flags.FLAGS.unparse_flags()
   flags.FLAGS(['register', *args])
   try:
-    register.main(['register'])
+    cli.one_line_errors(register.main)(['register'])
     results.append({'code': 0})
   except SystemExit as e:
     results.append({'code': e.code if isinstance(e.code, int) else 1, 'message': str(e.code)})
@@ -368,10 +369,10 @@ def test_register_puts_dense_clouds_on_the_grid_and_voxel_0_keeps_every_point(ti
   assert 'stage' not in out.stderr and '\r' not in out.stderr
   bad = _run('experiments.register', f'--cloud1={paths[0]}', f'--cloud2={paths[1]}', '--voxel=-1')
   assert bad.returncode != 0 and bad.stderr.strip() == \
-      'error: --voxel must be >= 0 metres (0: every point), got -1.0'
+      'error: voxel must be >= 0 (0: every point as given), got -1.0'
   bad = _run('experiments.register', f'--cloud1={paths[0]}', f'--cloud2={paths[1]}', '--verify=-2')
   assert bad.returncode != 0 and bad.stderr.strip() == \
-      'error: --verify must be >= 0 (0: no verification), got -2'
+      'error: verify must be >= 0 (0: no verification), got -2'
 
 
 def test_a_cloud_too_large_for_memory_fails_in_one_line(tiny_set, monkeypatch):

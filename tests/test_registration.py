@@ -167,7 +167,8 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
   pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
   c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
   # As scanned (sensor at the origin): exactly the stage-by-stage result, no shift.
-  reg, _, _ = pipeline.register(c1, c2, fpfh_max_nn=200)
+  reg, _, _ = pipeline.register(target=c1, source=c2,
+                                options=pipeline.Options.paper(fpfh_max_nn=200))
   staged = pipeline.estimate(pipeline.cloud_features(c1, fpfh_max_nn=200),
                              pipeline.cloud_features(c2, fpfh_max_nn=200))
   np.testing.assert_allclose(reg.transform, staged.transform, atol=1e-9)
@@ -177,7 +178,8 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
   for offset in (-centre, np.array([4.5e5, 5.4e6, 30.0]) - centre):
     shift = geometry.make_transform(np.eye(3), offset)
     t_gt = shift @ pair.transform @ geometry.invert_transform(shift)
-    reg, f1, _ = pipeline.register(c1 + offset, c2 + offset, fpfh_max_nn=200)
+    reg, f1, _ = pipeline.register(target=c1 + offset, source=c2 + offset,
+                                   options=pipeline.Options.paper(fpfh_max_nn=200))
     moved = lambda t: (c2 + offset) @ t[:3, :3].T + t[:3, 3]
     errors.append(np.linalg.norm(moved(reg.transform) - moved(t_gt), axis=1))
     assert np.abs(f1.xyz - offset).max() < 100   # keypoints in the caller's coordinates
@@ -214,6 +216,11 @@ def test_open3d_reference_pipeline_registers_a_pair_and_refuses_a_flat_one(synth
     assert metrics.registration_errors(pair.transform, t)['success']
     assert set(seconds) == {'features', 'matching', 'ransac'} and min(seconds.values()) >= 0
     assert 3 <= stats['inliers'] <= stats['matches'] and 0 < stats['fitness'] <= 1
+    # ISS found by the project's detector is Open3D's same call (the evaluation shares it).
+    iss = (keypoints.iss(c1), keypoints.iss(c2))
+    t, _, shared = reference.open3d_register(c1, c2, settings=settings, iss=iss)
+    assert metrics.registration_errors(pair.transform, t)['success']
+    assert shared['matches'] == stats['matches'] == len(iss[0])
   with pytest.raises(ValueError, match="settings must be one of"):
     reference.open3d_register(c1, c2, settings='pcl')
   flat = np.c_[np.random.default_rng(0).uniform(-10, 10, (2000, 2)), np.zeros(2000)]
@@ -283,7 +290,7 @@ def test_iss_falls_back_on_a_sparse_cloud_and_says_so():
   assert len(idx) >= 3 and f'ISS found {len(keypoints.iss(sparse))} keypoints in {len(sparse)}' \
       in note and ('farthest-point' in note or 'radii' in note), note
   # The pipeline carries the note, and a sparse pair registers instead of failing.
-  reg, f1, _ = pipeline.register(sparse, sparse, 'iss', 'fpfh')
+  reg, f1, _ = pipeline.register(target=sparse, source=sparse, options=pipeline.Options.paper())
   assert f1.note == note and any(note in n for n in reg.notes)
   # The evaluation protocol keeps the paper's ISS: too few keypoints fail the pair there.
   idx, note = pipeline.compute_keypoints(sparse, 'iss', fallback=False)
@@ -348,10 +355,11 @@ def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root
   c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
   rng = np.random.default_rng(0)
   dense = [np.repeat(c, 12, axis=0) + rng.normal(0, 0.03, (12 * len(c), 3)) for c in (c1, c2)]
-  reg, f1, f2 = pipeline.register(c1, c2, 'auto', 'fpfh', estimator='upright', icp=True)
+  options = pipeline.Options(descriptor='fpfh', verify=0, icp=True)
+  reg, f1, f2 = pipeline.register(target=c1, source=c2, options=options)
   assert 'used as given' in f1.grid and 'used as given' in f2.grid
   stages = []
-  reg_d, g1, g2 = pipeline.register(*dense, 'auto', 'fpfh', estimator='upright', icp=True,
+  reg_d, g1, g2 = pipeline.register(target=dense[0], source=dense[1], options=options,
                                     progress=stages.append)
   assert stages == ['cloud 1: grid', 'cloud 2: grid', 'cloud 1: keypoints',
                     'cloud 1: descriptors', 'cloud 2: keypoints', 'cloud 2: descriptors',

@@ -264,7 +264,7 @@ def test_reuse_and_config_errors(tiny_set, tmp_path):
 def test_cli_reports_bad_config_without_traceback(tmp_path):
   proc = subprocess.run(
       [sys.executable, '-m', 'experiments.make_synthetic', f'--out={tmp_path / "x"}',
-       '--config=configs/synthetic_small.py', '--config.clusters.num_pairs=3'],
+       '--config=configs/data/synthetic_small.py', '--config.clusters.num_pairs=3'],
       capture_output=True, text=True, cwd=ROOT_DIR)
   assert proc.returncode != 0
   assert 'error: clusters.num_pairs must be even' in proc.stderr

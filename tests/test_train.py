@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ssd_jax.configs import cpu_robust, cpu_small
+from ssd_jax.configs import ours as ours_config
+from ssd_jax.configs import paper_small
 from ssd_jax import config_checks, train
 from ssd_jax.data import datasets
 from ssd_jax.synthetic import dataset
@@ -37,9 +38,9 @@ def _step_fn(config, max_traces=None):
 
 
 def _robust(config):
-  """The options of configs/cpu_robust.py on a tiny config (its clouds span 8 m, so the
+  """The options of configs/ours.py on a tiny config (its clouds span 8 m, so the
   crop shrinks with them)."""
-  robust = cpu_robust.get_config().model
+  robust = ours_config.get_config().model
   for key in ('self_rotation', 'orientation_head', 'branch_dropout', 'independent_centers'):
     config.model[key] = robust[key]
   config.model.branch_crop_shift, config.model.branch_crop_radius = 2.0, 7.0
@@ -204,7 +205,7 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
   batch whose CF rotation fails costs ~10x the median), so no single batch decides, while
   a run that stops learning still fails. The `example` clouds learn most of what 75 steps
   teach in the first 10, so a window after step 5 would compare two trained networks."""
-  config = cpu_small.get_config()
+  config = paper_small.get_config()
   config.progress_bar = False
   config.data.eval_path = ''
   if source == 'synthetic':
@@ -232,10 +233,10 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
 def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
   script = textwrap.dedent('''
       import jax, numpy as np
-      from ssd_jax.configs import cpu_small
+      from ssd_jax.configs import paper_small
       from ssd_jax import train
       assert jax.device_count() == 2, jax.devices()
-      config = cpu_small.get_config()
+      config = paper_small.get_config()
       config.data.num_points, config.model.num_clusters, config.model.num_samples = 512, 64, 16
       config.train.batch_size = 2
       rng = np.random.default_rng(0)

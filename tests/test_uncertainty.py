@@ -45,9 +45,7 @@ def test_a_shift_along_a_corridor_tunnel_or_highway_is_free(kind):
   with a fitness near 1, and the assessment names translation along x as free."""
   cloud1, cloud2, t_true = degenerate.scan_pair(kind)
   np.testing.assert_allclose(t_true[:3, 3], [5.0, 0.0, 0.0])
-  model = pipeline.verified_model(pretrained.load('ours'))
-  reg, _, _ = pipeline.register(cloud1, cloud2, 'auto', 'learned', model, estimator='upright',
-                                verify_candidates=10, bev_candidates=5)
+  reg, _, _ = pipeline.register(target=cloud1, source=cloud2, model=pretrained.load('ours'))
   assert metrics.registration_errors(t_true, reg.transform)['rte'] > 1.0
   assert reg.verified_fitness.max() > 0.9
   u = reg.uncertainty

@@ -10,6 +10,7 @@ import numpy as np
 from scipy import spatial
 
 from ssd_jax import errors
+from ssd_jax.data import io
 
 
 class CloudDataError(errors.UserError):
@@ -114,3 +115,14 @@ def units_problem(points: np.ndarray, seed: int = 0) -> str:
             'metres centimetres to a metre: is it in millimetres or centimetres? ssd_jax '
             'reads metres')
   return ''
+
+
+def read_metres(path, fmt: str = 'auto', dtype=np.float64) -> np.ndarray:
+  """The cloud of the file at `path` (`io.read_cloud`, .bin layout `fmt`) as `dtype` in the
+  file's coordinates, NaN rows dropped (`clean_cloud`); one that does not look like
+  metres (`units_problem`) is a CloudDataError saying so."""
+  cloud = clean_cloud(io.read_cloud(path, fmt), str(path), dtype)
+  problem = units_problem(cloud)
+  if problem:
+    raise CloudDataError(f'{path}: {problem}')
+  return cloud

@@ -41,8 +41,10 @@ def _register_clouds(row: str, store: feature_store.FeatureStore, pair, seed: in
                      ) -> tuple[np.ndarray, dict]:
   """One of `CLOUD_ROWS` on one pair -> (T_12 [4, 4], {'inliers', 'matches'})."""
   if row == REFERENCE_ROW:
+    # ISS as the paper-protocol rows found it: Open3D's same call on the same cloud.
+    iss = tuple(store.keypoints(c, 'iss') for c in (pair.cloud1, pair.cloud2))
     t, _, stats = reference.open3d_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2),
-                                            seed, 'paper')
+                                            seed, 'paper', iss)
     return t, stats
   prepared = store.pair(pair.cloud1, pair.cloud2)   # shared with the verified rows
   best, refined, _ = verification.verify(prepared.cloud1.target, prepared.cloud2.source,

@@ -20,7 +20,7 @@ import numpy as np
 from ssd_jax import errors, inference, pretrained
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
-from ssd_jax.registration import batch, features as features_lib, pipeline
+from ssd_jax.registration import features as features_lib, pipeline
 from ssd_jax.registration import prepared as prepared_lib
 
 BUILTIN_KEYPOINTS = ('iss', 'random', 'auto')
@@ -171,13 +171,13 @@ class FeatureStore:
 
   def prepared(self, path: str | os.PathLike) -> prepared_lib.PreparedCloud:
     """`cloud(path)` as the BEV search and the verification use it, kept for the last
-    `batch.CACHE_SIZE` clouds (a set pairs each cloud 1 with several re-scans)."""
+    `pipeline.CACHE_SIZE` clouds (a set pairs each cloud 1 with several re-scans)."""
     key = str(path)
     if key in self._prepared:
       self._prepared.move_to_end(key)
     else:
       self._prepared[key] = prepared_lib.PreparedCloud(self.cloud(path))
-      if len(self._prepared) > batch.CACHE_SIZE:
+      if len(self._prepared) > pipeline.CACHE_SIZE:
         self._prepared.popitem(last=False)
     return self._prepared[key]
 

@@ -3,7 +3,7 @@ scans, scored at once.
 
 Two scans of one street taken tens of metres apart, by units with different beams, share
 few local neighbourhoods that look alike (a descriptor's nearest neighbour is the true
-partner for ~1 % of keypoints 30-40 m apart, docs/cross_sensor.md), yet they share the
+partner for ~1 % of keypoints 30-40 m apart, docs/notes/cross_sensor.md), yet they share the
 street's layout: where walls, poles, trees and cars stand. Seen from above, what rises
 above the ground is nearly the same for any unit that hits it at all. Each cloud becomes
 a top-down image of the cells holding such points (`structure_image`); cloud 2's image is
@@ -168,7 +168,7 @@ def _rotations(yaws: np.ndarray) -> np.ndarray:
 # the work of every yaw at `resolution`). Its COARSE_PEAKS * k best distinct peaks are then
 # scored at `resolution` and at the `yaw_step` yaws within (COARSE - 1) steps of theirs, in
 # a window of +-REFINE cells around each: the fine search near every peak the coarse one
-# found (docs/benchmarks.md: what the search costs, and that it keeps every pose).
+# found (docs/notes/benchmarks.md: what the search costs, and that it keeps every pose).
 COARSE = 2
 COARSE_PEAKS = 12
 REFINE = 2

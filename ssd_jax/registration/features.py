@@ -17,7 +17,7 @@ FPFH_RADIUS = 4.0  # docs/method.md §4: FPFH within 4 m.
 FPFH_MAX_NN = 0
 # Normals within 1 m / 30 neighbours (Open3D's usual setting). The reference's 4 m
 # normals round every edge and corner off, and FPFH, a histogram of normal angles,
-# loses what tells places apart: docs/results.md measures 4 m normals against these.
+# loses what tells places apart: docs/notes/results.md measures 4 m normals against these.
 NORMAL_RADIUS = 1.0
 NORMAL_MAX_NN = 30
 # The grid the searches above were chosen on (3DFeat-Net's 0.2 m voxels). A cloud much

@@ -7,15 +7,17 @@ estimate per pair.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
+import os
 import time
-from typing import Callable, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 from scipy import spatial
 
-from ssd_jax import inference
+from ssd_jax import errors, inference
 from ssd_jax.data import clean, preprocess
 from ssd_jax.data.clean import check_cloud
 from ssd_jax.registration import bev, features, icp, keypoints as keypoints_lib, matching
@@ -44,7 +46,7 @@ ON_GRID = 0.6
 # (the shipped models' 4 draws of 64 points, for the paper's protocol); with the BEV search
 # and the verification picking the pose, one draw of 32 registered every pair that four of
 # 64 did on every set of the README's table, at an eighth of the network's work
-# (docs/benchmarks.md).
+# (docs/notes/benchmarks.md).
 VERIFIED_DRAWS = 1
 VERIFIED_SAMPLES = 32
 
@@ -196,7 +198,7 @@ def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0
   """Keypoint indices into points [N, 3] and a note ('' or the fallback used):
 
     auto     `num_random` farthest-point keypoints: evenly spread, so found again in a
-             scan from another sensor or standpoint (docs/cross_sensor.md), the way the
+             scan from another sensor or standpoint (docs/notes/cross_sensor.md), the way the
              network's training samples its cluster centres; the register default
     iss      ISS with the paper's radii (docs/method.md §4); with `fallback`, a sparse
              cloud falls back to wider radii, then farthest-point keypoints
@@ -372,13 +374,17 @@ def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1, poi
   `verified_fitness` has one entry per candidate checked (k, or k + b); `seconds` gains
   'bev' (0 where it was not needed) and 'verify'. `confident_only`: only a pose fitting
   CONFIDENT_FITNESS is of use (no BEV search then): candidates far from it are not
-  refined in full (`verification.verify`)."""
+  refined in full (`verification.verify`); so it is for RANSAC's candidates alone before
+  the BEV search's join them."""
   t0 = time.perf_counter()
   pair = prepared.prepare_pair(points1, points2)
   target, source = pair.cloud1.target, pair.cloud2.source
   candidates = reg.candidates if reg.candidates is not None else reg.transform[None]
+  # With the BEV search to follow, RANSAC's candidates alone only decide whether it runs
+  # (a confident pose), and the call with both refines what wins: none is refined in full
+  # here unless it could be confident (`confident_only`).
   best, refined, fitness = verification.verify(target, source, candidates, memo=pair.memo,
-                                               confident_only=confident_only)
+                                               confident_only=confident_only or bev_candidates > 0)
   seconds = {**reg.seconds, 'verify': time.perf_counter() - t0}
   if bev_candidates > 0:
     seconds['bev'] = 0.0
@@ -475,35 +481,136 @@ def features_anywhere(points: np.ndarray, keypoints: str = 'iss', descriptor: st
   return f
 
 
-def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
-             descriptor: str = 'fpfh', model=None, seed: int = 0,
-             fpfh_max_nn: int = features.FPFH_MAX_NN, icp: bool = False,
-             estimator: str = 'rigid', voxel: float | None = None, verify_candidates: int = 0,
-             bev_candidates: int = 0, progress=None
-             ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
-  """The whole pipeline on two clouds, in the caller's coordinates.
+@dataclasses.dataclass(frozen=True)
+class Options:
+  """How `register` and `register_many` register a pair. The defaults are the register
+  command's (docs/registration.md); `Options.paper()` is the paper's protocol.
 
-  points1 (target) [N1, 3] and points2 (source) [N2, 3] metres, any float type. Clouds
-  that float32 cannot resolve to MAX_RESOLUTION (e.g. UTM coordinates) are shifted by
-  one common offset, cloud 1's centroid in float64, before any float32 step, so they
-  register as accurately as near the origin; the returned transform T_12 and keypoints
-  are in the input coordinates. Clouds near the origin are not shifted, so FPFH's
-  normals keep facing the sensor there, exactly as `cloud_features` computes them.
-  Each cloud is put on the `voxel` m grid first (`to_grid`; None: the model's, 0: every
-  point as given), ICP included; each feature's `grid` says what was done. With
-  `verify_candidates` k > 0, RANSAC's k distinct best poses, and with the upright
-  estimator the `bev_candidates` best of the bird's-eye-view search, are checked against
-  the clouds (`verify`) and the best of them, ICP-refined, is the transform.
-  `progress(stage)`, if given, is called as each stage starts.
-  -> (registration, features of cloud 1, features of cloud 2).
+  keypoints   KEYPOINTS: 'auto' (1,024 farthest-point keypoints, the first 512 tried
+              alone where the poses are verified: `coarse_to_fine`), 'iss' (the paper's;
+              a pair RANSAC cannot sample is registered again with farthest-point
+              keypoints), 'learned' (a detector model), 'random'.
+  descriptor  DESCRIPTORS: 'learned' (needs a model) or 'fpfh'.
+  estimator   ESTIMATORS: 'upright' (2-point samples of a turn about z and a shift, for
+              scans whose z axis is up) or 'rigid' (3-point samples, any rotation).
+  verify      RANSAC's this many distinct best poses checked against the clouds by ICP
+              (`verification`); 0 keeps RANSAC's best as it is.
+  bev         the bird's-eye-view search's this many best poses checked with them, where
+              they apply: upright estimator and verify > 0 (`bev_candidates`).
+  icp         point-to-plane ICP from the chosen pose (1 m, then 0.5 m).
+  draws       samplings of each ball the learned descriptor averages: None,
+              VERIFIED_DRAWS of VERIFIED_SAMPLES points where verify > 0, else the
+              model's own; 0 the model's own (`describing`).
+  voxel       metres of the grid each cloud is put on first (`to_grid`); None the
+              model's (0.2 m), 0 every point as given.
+  fpfh_max_nn FPFH's neighbour cap within its 4 m ball (0: none, the paper's).
+  seed        RANSAC's (and random keypoints') seed.
   """
-  if bev_candidates > 0 and estimator != 'upright':
-    raise ValueError(f"the BEV search's poses turn about z only: bev_candidates needs the "
-                     f"upright estimator, got {estimator!r}")
-  clouds = [check_cloud(p, name, np.float64) for p, name in ((points1, 'cloud 1'),
-                                                             (points2, 'cloud 2'))]
+  keypoints: str = 'auto'
+  descriptor: str = 'learned'
+  estimator: str = 'upright'
+  verify: int = 10
+  bev: int = 5
+  icp: bool = False
+  draws: int | None = None
+  voxel: float | None = None
+  fpfh_max_nn: int = features.FPFH_MAX_NN
+  seed: int = 0
+
+  def __post_init__(self):
+    for name, allowed in (('keypoints', KEYPOINTS), ('descriptor', DESCRIPTORS),
+                          ('estimator', ESTIMATORS)):
+      if getattr(self, name) not in allowed:
+        raise errors.UserError(f'{name} must be one of {allowed}, got {getattr(self, name)!r}')
+    for name, meaning in (('verify', '0: no verification'), ('bev', '0: no BEV search'),
+                          ('fpfh_max_nn', '0: no cap'), ('draws', "0: the model's own"),
+                          ('voxel', '0: every point as given')):
+      value = getattr(self, name)
+      if value is not None and value < 0:
+        raise errors.UserError(f'{name} must be >= 0 ({meaning}), got {value}')
+
+  @classmethod
+  def paper(cls, descriptor: str = 'fpfh', **overrides) -> 'Options':
+    """The paper's protocol: ISS keypoints, RANSAC over any rotation, no verification."""
+    return cls(**{'keypoints': 'iss', 'descriptor': descriptor, 'estimator': 'rigid',
+                  'verify': 0, 'bev': 0, **overrides})
+
+  @property
+  def bev_candidates(self) -> int:
+    """The BEV search's poses checked: `bev` with the upright estimator and verify > 0
+    (its poses turn about z only and are checked with RANSAC's), else 0."""
+    return self.bev if self.estimator == 'upright' and self.verify > 0 else 0
+
+  @property
+  def needs_model(self) -> bool:
+    return self.descriptor == 'learned' or self.keypoints == 'learned'
+
+  def describing(self, model):
+    """`model` (an `inference.Model`) as these options describe with it (`draws`); None
+    where no model is needed; a UserError where one is needed and not given."""
+    if not self.needs_model:
+      return None
+    if model is None:
+      raise errors.UserError(f'{self.keypoints} keypoints + {self.descriptor} descriptors '
+                             "need a model (e.g. pretrained.load('ours'))")
+    if self.draws is None:
+      return verified_model(model) if self.verify > 0 else model
+    return dataclasses.replace(model, draws=self.draws) if self.draws else model
+
+
+def _register_levels(levels, fallback, cloud1, cloud2, options: Options, progress=None):
+  """`coarse_to_fine` on two clouds' `FeatureLevels`; where ISS keypoints leave RANSAC
+  nothing to sample (too few, or every sample degenerate: a ValueError), again on
+  `fallback()`'s farthest-point levels. -> (registration, features of cloud 1, of cloud
+  2, the levels used, a note on the fallback or '')."""
+  def run(levels1, levels2):
+    return coarse_to_fine(levels1.levels, levels2.levels, cloud1, cloud2, seed=options.seed,
+                          estimator=options.estimator, candidates=max(options.verify, 1),
+                          bev_candidates=options.bev_candidates, verified=options.verify > 0,
+                          progress=progress)
+  try:
+    return (*run(*levels), levels, '')
+  except ValueError as e:
+    if options.keypoints != 'iss':
+      raise
+    levels = fallback()
+    return (*run(*levels), levels, f'{e}; registered again with {len(levels[0].idx)} / '
+            f'{len(levels[1].idx)} farthest-point keypoints')
+
+
+def _finish(reg: Registration, cloud1, cloud2, options: Options, origin=None,
+            progress=None) -> Registration:
+  """ICP where the options ask for it, then the pose's assessment (`assess`)."""
+  if options.icp:
+    if progress is not None:
+      progress('ICP')
+    t0 = time.perf_counter()
+    reg.transform, reg.icp_fitness = refine_icp(cloud1.points, cloud2.points, reg.transform)
+    reg.seconds['icp'] = time.perf_counter() - t0
+  return assess(reg, cloud1, cloud2, origin=origin)
+
+
+def register(*, target: np.ndarray, source: np.ndarray, model=None,
+             options: Options | None = None, progress=None
+             ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
+  """Register `source` onto `target`: the transform T_12 maps source points into the
+  target's frame (target = cloud 1, source = cloud 2 in every table and file).
+
+  target [N1, 3] and source [N2, 3] metres, any float type and coordinates; model: an
+  `inference.Model` where `options` need one (default `Options()`, the register
+  command's). Clouds that float32 cannot resolve to MAX_RESOLUTION (e.g. UTM
+  coordinates) are shifted by one common offset, the target's centroid in float64,
+  before any float32 step; T_12 and the keypoints come back in the input coordinates.
+  Each cloud is put on the options' grid first (`to_grid`; each feature's `grid` says
+  what was done). `progress(stage)`, if given, is called as each stage starts.
+  -> (registration, features of the target, features of the source).
+  """
+  options = Options() if options is None else options
+  model = options.describing(model)
+  clouds = [check_cloud(p, name, np.float64) for p, name in ((target, 'cloud 1'),
+                                                             (source, 'cloud 2'))]
   offset = local_origin(clouds[0], clouds[1])
-  voxel = voxel_size_of(model) if voxel is None else voxel
+  voxel = voxel_size_of(model) if options.voxel is None else options.voxel
   stage = (lambda name: None) if progress is None else progress
   local, grids = [], []
   for c, name in zip(clouds, ('cloud 1', 'cloud 2')):
@@ -512,52 +619,157 @@ def register(points1: np.ndarray, points2: np.ndarray, keypoints: str = 'iss',
     cloud, grid = to_grid(check_cloud(c - offset, name), voxel)
     local.append(cloud)
     grids.append((grid, time.perf_counter() - t0))
+  coarse = coarse_keypoints(options.verify > 0)
+  names = ('cloud 1', 'cloud 2')
 
-  coarse = coarse_keypoints(verify_candidates > 0)
-
-  def levels_of(c, name, kind):
-    stage(f'{name}: keypoints')
-    levels = feature_levels(c, kind, descriptor, model, seed, fpfh_max_nn, coarse)
+  def levels_of(n, kind):
+    stage(f'{names[n]}: keypoints')
+    levels = feature_levels(local[n], kind, options.descriptor, model, options.seed,
+                            options.fpfh_max_nn, coarse)
     levels.keypoints(0)
-    stage(f'{name}: descriptors')
+    stage(f'{names[n]}: descriptors')
     levels.levels[0]()   # the first level's, timed as this stage
-    levels.grid, levels.seconds['grid'] = grids[0 if name == 'cloud 1' else 1]
+    levels.grid, levels.seconds['grid'] = grids[n]
     return levels
 
-  names = ('cloud 1', 'cloud 2')
-  levels = [levels_of(c, name, keypoints) for c, name in zip(local, names)]
+  levels = [levels_of(n, options.keypoints) for n in range(2)]
   notes = [f'{name}: {f.note}' for name, f in zip(names, levels) if f.note]
   cloud1, cloud2 = (prepared.PreparedCloud(c) for c in local)
-  k = max(verify_candidates, 1)
-  register_levels = lambda: coarse_to_fine(
-      levels[0].levels, levels[1].levels, cloud1, cloud2, seed=seed, estimator=estimator,
-      candidates=k, bev_candidates=bev_candidates, verified=verify_candidates > 0,
-      progress=stage)
-  try:
-    reg, f1, f2 = register_levels()
-  except ValueError as e:
-    if keypoints != 'iss':
-      raise
-    # Degenerate samples (every match on one line of points) or too few keypoints: keypoints
-    # spread over the whole of both clouds give RANSAC something to sample.
-    levels = [levels_of(c, name, 'auto') for c, name in zip(local, names)]
-    notes.append(f'{e}; registered again with {len(levels[0].idx)} / {len(levels[1].idx)} '
-                 'farthest-point keypoints')
-    reg, f1, f2 = register_levels()
-  reg.notes = notes
-  if icp:
-    stage('ICP')
-    t0 = time.perf_counter()
-    reg.transform, reg.icp_fitness = refine_icp(local[0], local[1], reg.transform)
-    reg.seconds['icp'] = time.perf_counter() - t0
-  reg = assess(reg, cloud1, cloud2, origin=-offset)
-  transform = reg.transform
+  reg, f1, f2, _, fallback = _register_levels(
+      levels, lambda: [levels_of(n, 'auto') for n in range(2)], cloud1, cloud2, options, stage)
+  reg.notes = notes + ([fallback] if fallback else [])
+  reg = _finish(reg, cloud1, cloud2, options, origin=-offset, progress=stage)
   # T in centred coordinates maps p - o to q - o; in the caller's: q = R p + t + o - R o.
   to_local = np.eye(4)
   to_local[:3, 3] = -offset
-  reg.transform = np.linalg.inv(to_local) @ transform @ to_local
+  reg.transform = np.linalg.inv(to_local) @ reg.transform @ to_local
   f1.xyz, f2.xyz = (f.xyz.astype(np.float64) + offset for f in (f1, f2))
   return reg, f1, f2
+
+
+# Clouds `register_many` keeps: a KITTI-size scan costs ~5 MB (points, normals, KD-tree,
+# footprint, descriptors).
+CACHE_SIZE = 64
+# What `register_many` times per pair, in order: the first four only for a cloud met first.
+STAGES = ('read', 'grid', 'keypoints', 'descriptors', 'matching', 'ransac', 'bev', 'verify',
+          'icp', 'assess')
+
+
+@dataclasses.dataclass
+class PairResult:
+  """One pair of `register_many`: T_12 maps the source into the target's frame."""
+  target: str                               # path of cloud 1
+  source: str                               # path of cloud 2
+  registration: Registration | None = None  # None where the pair failed
+  target_features: CloudFeatures | None = None
+  source_features: CloudFeatures | None = None
+  error: str = ''                           # why the pair failed, one line ('' if not)
+  seconds: float = 0.0                      # wall time of this pair
+
+
+@dataclasses.dataclass
+class _Cloud:
+  points: prepared.PreparedCloud   # on the grid, float64, the file's coordinates
+  features: FeatureLevels          # keypoints and descriptors as the pairs need them
+  seconds: dict                    # read / grid, once
+
+
+class Registrar:
+  """Registers pairs of cloud files with one setting (`Options`), keeping the last
+  `cache_size` clouds it met: each read (`read(path)` -> [N, 3] float64 metres, the
+  file's coordinates), put on the grid, described (its coarse level first, the rest when
+  a pair needs it) and prepared for the BEV search and the verification once. `say(line)`
+  gets the one-line notes (grid, keypoint fallbacks). `register_many` streams pairs
+  through one."""
+
+  def __init__(self, read: Callable[[str], np.ndarray], *, model=None,
+               options: Options | None = None, say: Callable[[str], None] = print,
+               cache_size: int = CACHE_SIZE):
+    self._options = Options() if options is None else options
+    self._read, self._model, self._say = read, self._options.describing(model), say
+    self._voxel = (voxel_size_of(self._model) if self._options.voxel is None
+                   else self._options.voxel)
+    self._kept: dict[str, _Cloud] = {}
+    self._size = cache_size
+
+  def levels(self, points: np.ndarray, keypoints: str) -> FeatureLevels:
+    o = self._options
+    return feature_levels(points, keypoints, o.descriptor, self._model, o.seed, o.fpfh_max_nn,
+                          coarse_keypoints(o.verify > 0))
+
+  def cloud(self, path: str) -> tuple[_Cloud, bool]:
+    """The cloud at `path`, and whether it was made now (False: kept from before)."""
+    if path in self._kept:
+      self._kept[path] = self._kept.pop(path)   # the most recently used last
+      return self._kept[path], False
+    t0 = time.perf_counter()
+    points = self._read(path)
+    t1 = time.perf_counter()
+    points, note = to_grid(points, self._voxel)
+    t2 = time.perf_counter()
+    if note:
+      self._say(f'voxel: {os.path.basename(path)}: {note}')
+    f = self.levels(points, self._options.keypoints)
+    if f.note:
+      self._say(f'{os.path.basename(path)}: {f.note}')
+    self._kept[path] = _Cloud(prepared.PreparedCloud(points), f, {'read': t1 - t0,
+                                                                  'grid': t2 - t1})
+    if len(self._kept) > self._size:
+      del self._kept[next(iter(self._kept))]
+    return self._kept[path], True
+
+  def register(self, path1: str, path2: str
+               ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
+    """T_12 of the pair (maps cloud 2, the source, into cloud 1) -> (registration,
+    features of cloud 1, of cloud 2); the registration's `seconds` holds every stage this
+    pair cost (`STAGES`): reading and gridding a cloud met first, the keypoints and
+    descriptors it made, matching, RANSAC, the BEV search, the verification, ICP and the
+    assessment. A cloud that cannot be registered is a ValueError, a bad file the
+    reader's error."""
+    seconds = collections.defaultdict(float)
+    entries = []
+    for path in (path1, path2):
+      entry, new = self.cloud(path)
+      if new:
+        for stage, s in entry.seconds.items():
+          seconds[stage] += s
+      entries.append(entry)
+    levels = [e.features for e in entries]
+    lazy = ('keypoints', 'descriptors')   # what the clouds' levels have cost until now
+    before = {stage: sum(f.seconds[stage] for f in levels) for stage in lazy}
+    reg, f1, f2, used, fallback = _register_levels(
+        levels, lambda: [self.levels(e.points.points, 'auto') for e in entries],
+        entries[0].points, entries[1].points, self._options)
+    if fallback:
+      self._say(f'{os.path.basename(path1)} / {os.path.basename(path2)}: {fallback}')
+      levels = levels + list(used)
+    for stage in lazy:
+      seconds[stage] = sum(f.seconds[stage] for f in levels) - before[stage]
+    reg = _finish(reg, entries[0].points, entries[1].points, self._options)
+    reg.seconds = {**seconds, **reg.seconds}
+    return reg, f1, f2
+
+
+def register_many(pairs: Iterable[tuple[str, str]], read: Callable[[str], np.ndarray], *,
+                  model=None, options: Options | None = None,
+                  say: Callable[[str], None] = print, cache_size: int = CACHE_SIZE
+                  ) -> Iterator[PairResult]:
+  """Each (target path, source path) of `pairs` registered in turn, as a stream of
+  `PairResult`s: consecutive scans of a drive, a scan against tens of loop-closure
+  candidates, an evaluation set's pairs. Each cloud is made once among the last
+  `cache_size` met (`Registrar`: `read`, `say` as there). A pair that fails on bad input
+  (a missing or bad file, too few points, a flat cloud: a ValueError or OSError) gets its
+  `error` and the others go on. Each registration's `seconds` holds what that pair cost,
+  stage by stage (`STAGES`)."""
+  clouds = Registrar(read, model=model, options=options, say=say, cache_size=cache_size)
+  for path1, path2 in pairs:
+    start = time.perf_counter()
+    try:
+      reg, f1, f2 = clouds.register(path1, path2)
+    except (OSError, ValueError) as e:
+      yield PairResult(path1, path2, error=str(e), seconds=time.perf_counter() - start)
+    else:
+      yield PairResult(path1, path2, reg, f1, f2, seconds=time.perf_counter() - start)
 
 
 def refine_icp(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,

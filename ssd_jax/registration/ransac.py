@@ -100,9 +100,14 @@ def _check_samples(samples: np.ndarray, max_trials: int) -> None:
                      f'{max_trials + 1})')
 
 
-def _adaptive_trials(score: int, n: int, confidence: float, min_trials: int) -> float:
+def _adaptive_trials(score: int, n: int, confidence: float, min_trials: int,
+                     sample_size: int = 3) -> float:
+  """N = log(1 - p) / log(1 - w^s), at least `min_trials`: the trials after which a sample
+  of s correspondences all inliers (w = score / n of them) has been drawn with
+  probability p."""
   w = score / n
-  p_no_outliers = min(max(1.0 - w ** 3, np.finfo(float).eps), 1.0 - np.finfo(float).eps)
+  p_no_outliers = min(max(1.0 - w ** sample_size, np.finfo(float).eps),
+                      1.0 - np.finfo(float).eps)
   return max(float(min_trials), np.log(1.0 - confidence) / np.log(p_no_outliers))
 
 
@@ -204,9 +209,9 @@ def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
   if backend not in ('auto', 'numpy', 'jax'):
     raise ValueError(f"backend must be 'auto', 'numpy' or 'jax', got {backend!r}")
   if backend == 'numpy' or (backend == 'auto' and len(xyz1) <= NUMPY_MAX_CORRESPONDENCES):
-    trials, best_trial, best_score = _replay(_numpy_scorer(xyz1, xyz2, inlier_threshold), samples,
-                                             len(xyz1), confidence, max_trials, min_trials,
-                                             batch_size)
+    trials, best_trial, best_score, _ = _replay(
+        _numpy_scorer(xyz1, xyz2, inlier_threshold), samples, len(xyz1), confidence,
+        max_trials, min_trials, batch_size)
     inliers = _sample_inliers(xyz1, xyz2, samples[best_trial], inlier_threshold)
     transform = kabsch(xyz2[inliers], xyz1[inliers]) if best_score >= 3 else np.eye(4)
     return RansacResult(transform, inliers, trials)
@@ -218,8 +223,8 @@ def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
     score = lambda batch: np.asarray(_inlier_counts(   # the host reads each batch's counts:
         x1, x2, valid, jnp.asarray(batch, jnp.int32),  # the stopping rule needs them
         threshold=float(inlier_threshold)))
-    trials, best_trial, best_score = _replay(score, samples, n, confidence, max_trials,
-                                             min_trials, batch_size)
+    trials, best_trial, best_score, _ = _replay(score, samples, n, confidence, max_trials,
+                                                min_trials, batch_size, fixed_shape=True)
     r, t, inliers = _refit(x1, x2, valid, jnp.asarray(samples[best_trial], jnp.int32),
                            threshold=float(inlier_threshold))
   inliers = np.asarray(inliers)[:len(xyz1)]
@@ -230,30 +235,32 @@ def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
   return RansacResult(transform, inliers, trials)
 
 
-def _replay(score, samples, n, confidence, max_trials, min_trials, batch_size
-            ) -> tuple[int, int, int]:
-  """The sequential stopping rule over batches of inlier counts from `score`.
-  -> (trials, index of the best trial, its inlier count)."""
+def _replay(score, samples, n, confidence, max_trials, min_trials, batch_size,
+            fixed_shape: bool = False) -> tuple[int, int, int, np.ndarray]:
+  """The sequential stopping rule over batches of inlier counts: the one RANSAC loop of
+  both motion models. score(samples [B, s]) -> inlier counts [B] of the hypotheses of a
+  batch of samples [T, s] (s = 3 rigid, 2 upright: the rule's N uses w^s). Batches grow
+  FIRST_BATCH, 2x, ... up to `batch_size`; with `fixed_shape` the last one repeats its
+  final sample to full size (one jitted shape; the repeats are not replayed).
+  -> (trials, index of the best trial, its inlier count, the counts of the trials [trials])."""
+  sample_size = samples.shape[1]
   best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)
-  size, stop = min(FIRST_BATCH, batch_size), False
-  while not stop:
-    batch = samples[trials: trials + size]
-    if len(batch) < size:   # the last batch of the cap: same shape, repeats not replayed
+  size, scored = min(FIRST_BATCH, batch_size), []
+  while needed > trials and trials <= max_trials:
+    batch = samples[trials: min(trials + size, max_trials + 1)]
+    if fixed_shape and len(batch) < size:
       batch = np.concatenate([batch, np.repeat(batch[-1:], size - len(batch), 0)])
-    for score_ in score(batch).tolist():
-      if not needed > trials:
-        stop = True
-        break
-      if score_ >= best_score:
-        best_score, best_trial = score_, trials
-        needed = _adaptive_trials(score_, n, confidence, min_trials)
+    scores = np.asarray(score(batch))
+    scored.append(scores)
+    for s in scores.tolist():
+      if s >= best_score:
+        best_score, best_trial = s, trials
+        needed = _adaptive_trials(s, n, confidence, min_trials, sample_size)
       trials += 1
-      if trials > max_trials:
-        stop = True
+      if not needed > trials or trials > max_trials:
         break
-    stop = stop or not needed > trials
     size = min(2 * size, batch_size)
-  return trials, best_trial, best_score
+  return trials, best_trial, best_score, np.concatenate(scored)[:trials]
 
 
 # Upright RANSAC: scans whose z axis is up (a vehicle's LiDAR, a levelled tripod) differ by
@@ -331,7 +338,7 @@ def ransac_upright(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
                    max_trials: int = 10_000, min_trials: int = 10,
                    batch_size: int = 512, candidates: int = 1) -> RansacResult:
   """RANSAC over 2-point upright hypotheses (`upright_fit`) with the adaptive stopping rule
-  of `ransac_sequential` for 2-point samples (N = log(1 - p) / log(1 - w^2)).
+  of `ransac_sequential` for 2-point samples (N = log(1 - p) / log(1 - w^2); `_replay`).
   Correspondences xyz1[i] <-> xyz2[i] ([C, 3] metres), samples [>= max_trials + 1, 2]
   from `draw_upright_samples`. The best hypothesis is refit on its inliers in all 6
   degrees of freedom (Kabsch), its inliers recounted and the pose refit once more, so a
@@ -362,24 +369,8 @@ def ransac_upright(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
     dx += dz
     return np.sum(dx < thr2, axis=1)
 
-  n = len(xyz1)
-  best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)
-  size = min(FIRST_BATCH, batch_size)
-  scored = []
-  while needed > trials and trials <= max_trials:
-    batch = samples[trials: min(trials + size, max_trials + 1)]
-    scores = score(batch)
-    scored.append(scores)
-    for s in scores.tolist():
-      if s >= best_score:
-        best_score, best_trial = s, trials
-        w = s / n
-        p_fail = min(max(1.0 - w * w, np.finfo(float).eps), 1.0 - np.finfo(float).eps)
-        needed = max(float(min_trials), np.log(1.0 - confidence) / np.log(p_fail))
-      trials += 1
-      if not needed > trials or trials > max_trials:
-        break
-    size = min(2 * size, batch_size)
+  trials, best_trial, _, scores = _replay(score, samples, len(xyz1), confidence, max_trials,
+                                          min_trials, batch_size)
   residual = lambda t: np.sum((xyz2 @ t[:3, :3].T + t[:3, 3] - xyz1) ** 2, -1)
 
   def refit(trial):
@@ -396,7 +387,6 @@ def ransac_upright(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
   if candidates <= 1:
     return RansacResult(transform, inliers, trials)
   # Every scored trial up to the stop; the best one first, as the loop chose it.
-  scores = np.concatenate(scored)[:trials]
   scores[best_trial] = np.iinfo(scores.dtype).max
   fits = upright_fit(xyz2[samples[:trials]], xyz1[samples[:trials]])
   others = [refit(i)[0] for i in distinct_best(fits, scores, candidates)[1:]]

@@ -56,9 +56,12 @@ def _search(o3d, radius: float, max_nn: int | None):
 
 
 def open3d_register(points1: np.ndarray, points2: np.ndarray, seed: int = 0,
-                    settings: str = 'paper') -> tuple[np.ndarray, dict, dict]:
+                    settings: str = 'paper', iss: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> tuple[np.ndarray, dict, dict]:
   """The plain Open3D pipeline on two clouds [N, 3] metres with the searches of
-  `SETTINGS[settings]` -> (T_12 [4, 4] mapping cloud 2 into cloud 1's frame,
+  `SETTINGS[settings]`; `iss`: each cloud's ISS keypoint indices where already found
+  (`keypoints.iss`: the same Open3D call, mapped to indices as here) -> (T_12 [4, 4]
+  mapping cloud 2 into cloud 1's frame,
   {stage: seconds} for features (both clouds), matching, ransac, {'matches': K1,
   'inliers': RANSAC's correspondence set size, 'fitness', 'inlier_rmse'} as Open3D's
   `RegistrationResult` gives them)."""
@@ -69,12 +72,15 @@ def open3d_register(points1: np.ndarray, points2: np.ndarray, seed: int = 0,
   reg = o3d.pipelines.registration
   t0 = time.perf_counter()
   feats = []
-  for points in (points1, points2):
+  for n, points in enumerate((points1, points2)):
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, np.float64)))
-    iss = o3d.geometry.keypoint.compute_iss_keypoints(pcd, **keypoints.ISS_PARAMS)
-    # Open3D gives keypoint coordinates; FPFH at their indices comes in ascending order.
-    _, idx = spatial.cKDTree(np.asarray(pcd.points)).query(np.asarray(iss.points))
-    idx = np.unique(idx)
+    if iss is None:
+      found = o3d.geometry.keypoint.compute_iss_keypoints(pcd, **keypoints.ISS_PARAMS)
+      # Open3D gives keypoint coordinates; FPFH at their indices comes in ascending order.
+      _, idx = spatial.cKDTree(np.asarray(pcd.points)).query(np.asarray(found.points))
+      idx = np.unique(idx)
+    else:
+      idx = np.asarray(iss[n], np.int64)
     pcd.estimate_normals(_search(o3d, search.normal_radius, search.normal_max_nn))
     if search.orient_to_origin:
       pcd.orient_normals_towards_camera_location(np.zeros(3))

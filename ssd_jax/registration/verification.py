@@ -78,10 +78,11 @@ def clearly_confident(poses: np.ndarray, fitness: np.ndarray) -> bool:
               and (len(order) < 2 or fitness[order[1]] < best - FINE_MARGIN))
 
 
-# Where only a confident pose is of use (`pipeline.coarse_to_fine`'s coarse level), the
-# candidates are not refined in full when the best coarse-aligned one fits under
-# CONFIDENT_FITNESS - UNREFINED_MARGIN: the full ICP raised a pose's fitness by at most 0.07
-# over its coarse alignment on the synthetic cross-sensor pairs.
+# Where only a confident pose is of use (`pipeline.coarse_to_fine`'s coarse level; RANSAC's
+# candidates before the BEV search's join them), the candidates are not refined in full
+# when the best coarse-aligned one fits under CONFIDENT_FITNESS - UNREFINED_MARGIN: the
+# full ICP raised a pose's fitness by at most 0.07 over its coarse alignment on the
+# synthetic cross-sensor pairs.
 UNREFINED_MARGIN = 0.15
 
 

@@ -373,7 +373,7 @@ def _varied_clutter(b: _MeshBuilder, rng: np.random.Generator, s: float, d: floa
       b.cylinder(Label.CLUTTER, s + 1.2 * k, d, 0.0, rng.uniform(0.08, 0.2), rng.uniform(0.6, 1.2))
   elif kind == 2:  # bench with a backrest
     # The backrest is shifted along s only, not across the turned seat, so it sits
-    # askew; kept, as the measured synthetic_small_varied split was drawn with it.
+    # askew: the documented synthetic_small_varied split is drawn with it.
     b.box(Label.CLUTTER, s, d, 0.0, (1.8, 0.5, 0.45), yaw)
     b.box(Label.CLUTTER, s + 0.25 * np.sin(yaw), d, 0.45, (1.8, 0.08, 0.45), yaw)
   elif kind == 3:  # electrical cabinet
@@ -410,7 +410,7 @@ def make_scene(rng: np.random.Generator, length: float = 240.0, clutter_scale: f
 
   `clutter_scale` multiplies the drawn density of sidewalk objects. `varied_objects`
   draws them from eight kinds at random yaws (`_varied_clutter`) and parks half of
-  the cars at an angle; the default scene draws exactly as before either option existed.
+  the cars at an angle; with neither, the random draws are those of the default scene.
   """
   style = sample_style(rng, length)
   style = dataclasses.replace(style, clutter_per_100m=style.clutter_per_100m * clutter_scale)

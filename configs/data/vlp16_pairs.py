@@ -1,0 +1,22 @@
+"""A VLP-16 against VLP-16 test set: the sensor the shipped models never trained on, in
+scenes the adaptation scans do not show (`experiments.adapt`'s measurement).
+
+Command (~1 minute):
+
+    python -m experiments.make_cross_sensor --config=configs/data/vlp16_pairs.py \
+        --out=data_cache/vlp16_pairs
+
+48 pairs (2 scenes x 4 distance bins x 6 pairs), both clouds from a VLP-16-like unit
+5-40 m apart at any yaw; no real re-scans. `configs/evals/adaptation.py` evaluates it.
+"""
+
+from ssd_jax.configs.data import cross_sensor as cross_sensor_data
+
+
+def get_config():
+  config = cross_sensor_data.get_config()
+  config.cross_sensor.reference = 'vlp16'
+  config.cross_sensor.sensors = ('vlp16',)
+  config.cross_sensor.pairs_per_cell = 6
+  config.real.sources = ()
+  return config
