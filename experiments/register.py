@@ -45,6 +45,7 @@ flags.DEFINE_integer('verify', DEFAULTS.verify, "Check RANSAC's this many distin
 flags.DEFINE_integer('bev', DEFAULTS.bev, "Also check the bird's-eye-view search's this many "
                      'best poses (needs --ransac=upright and --verify > 0).')
 flags.DEFINE_list('descriptor', [DEFAULTS.descriptor], 'learned, fpfh; a list runs each.')
+flags.DEFINE_enum('level', DEFAULTS.level, pipeline.LEVELS, 'ground: level tilted scans first.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: ours, or '
                     'ours_detector for learned keypoints).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding the pairs (optional).')
@@ -60,8 +61,7 @@ flags.DEFINE_string('plot', None, 'Draw the clouds and inlier matches here (PNG)
 flags.DEFINE_string('pairs', None, 'Batch mode: a file of "cloud1 cloud2" lines.')
 flags.DEFINE_string('sequence', None, 'Batch mode: each scan of this folder to the next.')
 flags.DEFINE_string('out', None, 'Batch mode: output folder (a rerun keeps its rows).')
-flags.DEFINE_bool('allow_degenerate', False, 'Return a pose the scans do not fix (a corridor: '
-                  'a shift along it is free) with the verdict, instead of refusing it.')
+flags.DEFINE_bool('allow_degenerate', False, 'Return a pose the scans leave free (a corridor).')
 flags.DEFINE_bool('stop_on_error', False, 'Batch mode: stop at the first pair that fails.')
 
 
@@ -70,7 +70,8 @@ def _options(descriptor: str) -> pipeline.Options:
     raise errors.UserError("--bev needs --ransac=upright and --verify > 0 (its poses turn "
                            "about z only, and are checked with RANSAC's)")
   return pipeline.Options(FLAGS.keypoints, descriptor, FLAGS.ransac, FLAGS.verify, FLAGS.bev,
-                          FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed)
+                          FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed,
+                          FLAGS.level)
 
 
 def _read(path: str) -> np.ndarray:
@@ -78,7 +79,7 @@ def _read(path: str) -> np.ndarray:
 
 
 def _show_progress() -> bool:
-  return FLAGS.progress if FLAGS.progress is not None else sys.stderr.isatty()
+  return sys.stderr.isatty() if FLAGS.progress is None else FLAGS.progress
 
 
 def _batch(options: pipeline.Options, model, model_name: str) -> None:
@@ -165,8 +166,8 @@ def _register_pair(options, loaded, name: str, bar: cli.StageBar) -> None:
         target=clouds[0], source=clouds[1], model=loaded,
         options=dataclasses.replace(o, voxel=0.0),   # on the grid already
         progress=lambda s, d=o.descriptor: bar.stage(f'{d}: {s}') if 'grid' not in s else None)
-    if outputs.refusal(reg, FLAGS.allow_degenerate):
-      raise errors.UserError(outputs.refusal(reg, FLAGS.allow_degenerate))
+    if refused := outputs.refusal(reg, FLAGS.allow_degenerate):
+      raise errors.UserError(refused)
     bar.close() if o is options[-1] else bar.clear()   # redrawn below this report
     out = outputs.pair_json(reg, f1, f2, o, o.describing(loaded), name,
                             (len(clouds[0]), len(clouds[1])), voxel)
@@ -176,9 +177,7 @@ def _register_pair(options, loaded, name: str, bar: cli.StageBar) -> None:
     if t_gt is not None:
       out['errors'] = metrics.registration_errors(t_gt, reg.transform)
     results.append(out)
-    for note in reg.notes:
-      print(f'keypoints: {note}')
-    print(outputs.summary(out, reg))
+    print(*(f'note: {n}' for n in reg.notes), outputs.summary(out, reg), sep='\n')
     if FLAGS.plot:
       root, ext = os.path.splitext(FLAGS.plot)
       path = FLAGS.plot if len(options) == 1 else f'{root}_{o.descriptor}{ext or ".png"}'

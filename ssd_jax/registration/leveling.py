@@ -1,0 +1,172 @@
+"""Levelling: a scan turned so that its ground is horizontal, before anything that assumes
+z is up (the learned descriptor's orientation about z, upright RANSAC, the BEV search).
+
+A sensor that is not level (a robot on a slope, a unit mounted pitched down, a backpack or
+hand-held scanner) sees its ground tilted. The ground is the largest plane below the sensor
+whose normal is within MAX_TILT_DEG of the scan's z: `ground` finds it by RANSAC over
+3-point samples of points whose own normals are that steep, and `level` gives the rotation
+that turns its normal onto z (the smallest one: no turn about z is added). A registration
+of levelled clouds is composed back into the clouds' own frames (`Leveling.matrix`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ssd_jax.data import preprocess
+from ssd_jax.registration import icp
+
+# Degrees: a plane whose normal is farther than this from the scan's z is not its ground
+# (walls are ~90 degrees off; a unit pitched down by 30 degrees sees its ground 30 off).
+MAX_TILT_DEG = 45.0
+# Metres: the ground lies at least this far below the sensor along its normal (a ceiling
+# or a roof lies above it).
+MIN_SENSOR_HEIGHT = 0.5
+# Metres: a point this close to the plane is on it.
+PLANE_DISTANCE = 0.15
+# The ground holds at least this share of the scan's points and MIN_GROUND_POINTS.
+MIN_GROUND_SHARE = 0.1
+MIN_GROUND_POINTS = 200
+# Points the plane is sought among (an even stride), and RANSAC's samples.
+SEARCH_POINTS = 20_000
+TRIALS = 300
+
+
+@dataclasses.dataclass(frozen=True)
+class Leveling:
+  """The turn that levels one cloud: rotation [3, 3] about `center` [3] (metres), the
+  ground's normal [3] before it, the tilt in degrees; `note` is '' or the one line saying
+  why the cloud was left as it is."""
+  rotation: np.ndarray
+  center: np.ndarray
+  normal: np.ndarray
+  tilt_deg: float
+  note: str = ''
+
+  @property
+  def turned(self) -> bool:
+    return not np.array_equal(self.rotation, np.eye(3))
+
+  def apply(self, points: np.ndarray) -> np.ndarray:
+    """points [N, 3] -> the levelled points (float64; as given where nothing is turned)."""
+    if not self.turned:
+      return points
+    points = np.asarray(points, np.float64)
+    return (points - self.center) @ self.rotation.T + self.center
+
+  def undo(self, points: np.ndarray) -> np.ndarray:
+    """Levelled points [N, 3] -> in the cloud's own frame (float64)."""
+    if not self.turned:
+      return points
+    points = np.asarray(points, np.float64)
+    return (points - self.center) @ self.rotation + self.center
+
+  @property
+  def matrix(self) -> np.ndarray:
+    """[4, 4]: x -> R (x - c) + c. A registration T' of levelled clouds is
+    L1^-1 T' L2 in the clouds' own frames."""
+    m = np.eye(4)
+    m[:3, :3] = self.rotation
+    m[:3, 3] = self.center - self.rotation @ self.center
+    return m
+
+
+def unchanged(center: np.ndarray | None = None, note: str = '') -> Leveling:
+  return Leveling(np.eye(3), np.zeros(3) if center is None else np.asarray(center, np.float64),
+                  np.array([0.0, 0.0, 1.0]), 0.0, note)
+
+
+def rotation_onto_z(normal: np.ndarray) -> np.ndarray:
+  """The smallest rotation [3, 3] that turns the unit vector `normal` onto +z (Rodrigues)."""
+  n = np.asarray(normal, np.float64) / np.linalg.norm(normal)
+  z = np.array([0.0, 0.0, 1.0])
+  axis = np.cross(n, z)
+  s, c = np.linalg.norm(axis), float(n @ z)
+  if s < 1e-12:
+    return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+  k = axis / s
+  kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+  return np.eye(3) + s * kx + (1.0 - c) * kx @ kx
+
+
+def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0
+           ) -> tuple[np.ndarray, float, int] | None:
+  """The ground plane of a scan: points [N, 3] metres -> (unit normal [3] pointing up, the
+  height of the sensor (else of the points' centroid) above the plane in metres, the
+  plane's inlier count among the points searched), or None where no plane within
+  MAX_TILT_DEG of z holds MIN_GROUND_SHARE of the points (a scan of walls alone, a
+  tunnel). With `sensor_at_origin` (a scan in its sensor's frame) the plane must also lie
+  MIN_SENSOR_HEIGHT below the sensor, which rules out a ceiling or a roof."""
+  points = np.asarray(points, np.float64)
+  pts = points[::preprocess.even_stride(len(points), SEARCH_POINTS)]
+  if not sensor_at_origin:
+    pts = pts - pts.mean(axis=0)
+  floor = MIN_SENSOR_HEIGHT if sensor_at_origin else -np.inf
+  if len(pts) < MIN_GROUND_POINTS:
+    return None
+  normals = icp.normals(pts)
+  cos_max = np.cos(np.deg2rad(MAX_TILT_DEG))
+  steep = np.flatnonzero(np.abs(normals[:, 2]) >= cos_max)
+  if len(steep) < 3:
+    return None
+  rng = np.random.default_rng(seed)
+  samples = steep[rng.integers(0, len(steep), (TRIALS, 3))]
+  a, b, c = pts[samples[:, 0]], pts[samples[:, 1]], pts[samples[:, 2]]
+  n = np.cross(b - a, c - a)
+  length = np.linalg.norm(n, axis=1)
+  ok = length > 1e-6
+  n = n[ok] / length[ok, None]
+  n *= np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]              # pointing up
+  height = -np.sum(n * a[ok], axis=1)                         # sensor above the plane
+  keep = (n[:, 2] >= cos_max) & (height >= floor)
+  if not keep.any():
+    return None
+  n, height = n[keep], height[keep]
+  counts = np.sum(np.abs(pts @ n.T + height) < PLANE_DISTANCE, axis=0)
+  best = int(np.argmax(counts))
+  inliers = np.abs(pts @ n[best] + height[best]) < PLANE_DISTANCE
+  # Least squares over the inliers: the plane through their centroid, normal the least
+  # principal axis.
+  on = pts[inliers]
+  centroid = on.mean(axis=0)
+  normal = icp.least_axis(np.cov((on - centroid).T)[None])[0]
+  normal *= 1.0 if normal[2] >= 0 else -1.0
+  height = float(-normal @ centroid)
+  count = int(np.sum(np.abs(pts @ normal + height) < PLANE_DISTANCE))
+  if (count < max(MIN_GROUND_POINTS, MIN_GROUND_SHARE * len(pts)) or height < floor
+      or normal[2] < cos_max):
+    return None
+  return normal, height, count
+
+
+def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
+          min_tilt_deg: float = 0.0, sensor_at_origin: bool = True) -> Leveling:
+  """The `Leveling` of a scan (points [N, 3] metres; `sensor_at_origin` as for `ground`):
+  the turn about `center` (default the origin) that makes its ground horizontal; no turn
+  where the ground is tilted by less than `min_tilt_deg`, or where none is found (then
+  `note` says so)."""
+  found = ground(points, sensor_at_origin, seed)
+  if found is None:
+    return unchanged(center, 'no ground plane found to level it by (a plane below the '
+                     f'sensor within {MAX_TILT_DEG:g} degrees of its z axis, holding '
+                     f'{MIN_GROUND_SHARE:.0%} of its points)')
+  normal = found[0]
+  tilt = float(np.degrees(np.arccos(np.clip(normal[2], -1.0, 1.0))))
+  if tilt < min_tilt_deg:
+    return dataclasses.replace(unchanged(center), normal=normal, tilt_deg=tilt)
+  return Leveling(rotation_onto_z(normal), np.zeros(3) if center is None else
+                  np.asarray(center, np.float64), normal, tilt)
+
+
+def from_gravity(gravity, center: np.ndarray | None = None) -> Leveling:
+  """The `Leveling` from a measured gravity direction [3] in the scan's frame (an IMU's:
+  pointing down): the turn that makes -gravity the z axis."""
+  g = np.asarray(gravity, np.float64)
+  if g.shape != (3,) or not np.all(np.isfinite(g)) or np.linalg.norm(g) < 1e-9:
+    raise ValueError(f'gravity must be three finite numbers, not all 0, got {gravity!r}')
+  up = -g / np.linalg.norm(g)
+  tilt = float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0))))
+  return Leveling(rotation_onto_z(up), np.zeros(3) if center is None else
+                  np.asarray(center, np.float64), up, tilt)
