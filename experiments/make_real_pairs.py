@@ -45,6 +45,8 @@ flags.DEFINE_float('max_shift', rescan.RescanConfig.max_shift,
                    'Farthest standpoint of the second view, metres.')
 flags.DEFINE_float('max_range', rescan.RescanConfig.max_range,
                    'Both views keep what lies within this many metres of their centre.')
+flags.DEFINE_list('tilt', ['0', '0'], 'Degrees lo,hi: tilt the second view\'s sensor by an angle '
+                  'in this range about a random horizontal axis (a pitched or rolled unit).')
 
 
 def main(argv):
@@ -64,9 +66,16 @@ def main(argv):
       sensors.get(FLAGS.sensor)
   except ValueError as e:
     raise SystemExit(f'error: --sensor: {e}') from None
+  try:
+    tilt = tuple(float(t) for t in FLAGS.tilt)
+  except ValueError:
+    tilt = ()
+  if len(tilt) != 2 or not 0 <= tilt[0] <= tilt[1] <= 90:
+    raise SystemExit(f'error: --tilt must be lo,hi degrees with 0 <= lo <= hi <= 90, got '
+                     f'{",".join(FLAGS.tilt)}')
   cfg = rescan.RescanConfig(max_range=FLAGS.max_range, occlusion=not FLAGS.submaps,
                             sensor=FLAGS.sensor, min_shift=FLAGS.min_shift,
-                            max_shift=FLAGS.max_shift)
+                            max_shift=FLAGS.max_shift, tilt=tilt)
   with tqdm.tqdm(total=len(sources) * FLAGS.pairs_per_cloud, desc='re-scan pairs',
                  unit='pair') as bar:
     rows = rescan.make_rescan_set(sources, FLAGS.out, FLAGS.seed, FLAGS.pairs_per_cloud,

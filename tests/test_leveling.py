@@ -56,7 +56,7 @@ def test_gravity_gives_the_turn_that_makes_up_the_z_axis():
 
 
 @pytest.mark.slow
-def test_tilted_scans_register_through_levelling_in_their_own_frames(scan):
+def test_tilted_scans_register_through_levelling_in_their_own_frames(scan, tmp_path):
   """A real scan against a copy 25 degrees tilted, turned 40 degrees about z and moved: the
   descriptor alone (no verification, no BEV search) registers it once both are levelled,
   and T_12 comes back in the tilted scan's own frame."""
@@ -77,11 +77,18 @@ def test_tilted_scans_register_through_levelling_in_their_own_frames(scan):
   inl = reg.matches[reg.inliers]
   moved = f2.xyz[inl[:, 1]] @ reg.transform[:3, :3].T + reg.transform[:3, 3]
   assert np.median(np.linalg.norm(moved - f1.xyz[inl[:, 0]], axis=1)) < 1.0
-  # With every default and levelling, too; and a cloud without ground gets its note and
-  # an answer from the rotation-invariant path.
+  # With every default and levelling, too, one pair or many; and a cloud without ground
+  # gets its note and an answer from the rotation-invariant path.
   reg, _, _ = pipeline.register(target=cloud1, source=cloud2, model=model,
                                 options=pipeline.Options(level='ground'))
   assert metrics.registration_errors(move, reg.transform)['success']
+  np.save(tmp_path / 'a.npy', cloud1)
+  np.save(tmp_path / 'b.npy', cloud2)
+  [many] = pipeline.register_many([(str(tmp_path / 'a.npy'), str(tmp_path / 'b.npy'))],
+                                  np.load, model=model, options=pipeline.Options(level='ground'),
+                                  say=lambda line: None)
+  assert not many.error and any('levelled' in n for n in many.registration.notes)
+  assert metrics.registration_errors(move, many.registration.transform)['success']
   # (cloud 2 without its ground, and pitched 60 degrees: no plane within 45 of its z).
   up = cloud2 @ move[:3, :3].T + move[:3, 3]                      # in cloud 1's frame
   steep = geometry.make_transform(_tilt(60.0, 0.0), np.zeros(3))

@@ -30,6 +30,25 @@ def test_rescan_pair_is_a_different_sampling_that_the_transform_aligns():
 
 
 @pytest.mark.real_data
+def test_a_tilted_rescan_is_seen_by_a_unit_tilted_within_the_range():
+  """cfg.tilt: the second view's sensor is tilted (about a horizontal axis) by an angle in
+  the range, T_12 holds the tilt and the yaw, and still aligns the two views."""
+  points = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin'))
+  cfg = rescan.RescanConfig(tilt=(10.0, 30.0))
+  for seed in range(3):
+    cloud1, cloud2, t12 = rescan.rescan_pair(np.random.default_rng(seed), points, 70.0, cfg)
+    tilt = np.degrees(np.arccos(t12[2, 2]))                    # of the sensor's z axis
+    assert 10.0 - 1e-6 <= tilt <= 30.0 + 1e-6, tilt
+    moved = cloud2 @ t12[:3, :3].T + t12[:3, 3]
+    assert np.median(spatial.cKDTree(cloud1).query(moved)[0]) < 0.1
+  # No tilt asked for: the draws, and the pair, are those of an untilted set.
+  plain = rescan.rescan_pair(np.random.default_rng(0), points, 70.0, rescan.RescanConfig())
+  again = rescan.rescan_pair(np.random.default_rng(0), points, 70.0,
+                             rescan.RescanConfig(tilt=(0.0, 0.0)))
+  np.testing.assert_array_equal(plain[2], again[2])
+
+
+@pytest.mark.real_data
 def test_second_submap_keeps_what_a_sensor_would_not_see():
   """Submap pairs (occlusion off): the second view is the whole place within max_range
   of a displaced centre, not what a sensor there would see."""
@@ -80,6 +99,10 @@ def test_make_real_pairs_command_submaps_and_bad_flags(tmp_path):
   out = run('--max_range=0', f'--out={tmp_path / "y"}')
   assert out.returncode == 1 and '--max_range must be > 0' in out.stderr
   assert 'Traceback' not in out.stderr
+  for tilt in ('30,10', 'a,b', '5'):
+    out = run(f'--tilt={tilt}', f'--out={tmp_path / "z"}')
+    assert out.returncode == 1 and '--tilt must be lo,hi degrees' in out.stderr, out.stderr
+    assert 'Traceback' not in out.stderr
 
 
 @pytest.mark.real_data

@@ -50,6 +50,9 @@ class RescanConfig:
   # uniform angle, so a scan that covers a sector only (KITTI's front-camera crops) is
   # re-scanned from over its own data when the standpoint is tens of metres away.
   toward_points: bool = False
+  # Degrees (lo, hi): the virtual sensor is also tilted by an angle drawn from this range
+  # about a random horizontal axis (a unit pitched or rolled: levelling's test sets).
+  tilt: tuple[float, float] = (0.0, 0.0)
 
 
 def _voxel_grid(rng: np.random.Generator, points: np.ndarray, size: float) -> np.ndarray:
@@ -94,6 +97,10 @@ def _virtual_scan(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
     seen = points[visible_from(points, shift, cfg.hpr_radius_factor)] if cfg.occlusion else points
     c, s = np.cos(np.deg2rad(yaw_deg)), np.sin(np.deg2rad(yaw_deg))
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    if cfg.tilt[1] > 0:   # drawn only then: the untilted sets keep their draws
+      axis, half = rng.uniform(-np.pi, np.pi), np.deg2rad(rng.uniform(*cfg.tilt)) / 2.0
+      rot = rot @ np.asarray(geometry.quaternion_to_matrix(np.array(
+          [np.cos(half), np.sin(half) * np.cos(axis), np.sin(half) * np.sin(axis), 0.0])))
     local = (seen - shift) @ rot   # row form of R^T (p - c)
     if cfg.sensor:
       local = local[sensors.resample(local, sensors.get(cfg.sensor))]

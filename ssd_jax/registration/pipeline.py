@@ -511,7 +511,8 @@ class Options:
   level       LEVELS: 'none' (the clouds as given) or 'ground' (each scan whose ground is
               tilted by LEVEL_MIN_TILT_DEG or more is first turned level, `leveling`; a
               scan without a ground is registered with FPFH and RANSAC over any
-              rotation, and a note says so). `register` only, for now.
+              rotation, and a note says so). In `register_many` each pair is then
+              registered as `register` does, its features not kept across pairs.
   """
   keypoints: str = 'auto'
   descriptor: str = 'learned'
@@ -733,9 +734,6 @@ class Registrar:
                options: Options | None = None, say: Callable[[str], None] = print,
                cache_size: int = CACHE_SIZE):
     self._options = Options() if options is None else options
-    if self._options.level != 'none':
-      raise errors.UserError(f"level={self._options.level!r} registers one pair at a time "
-                             '(pipeline.register); many pairs take their scans as given')
     self._read, self._model, self._say = read, self._options.describing(model), say
     self._voxel = (voxel_size_of(self._model) if self._options.voxel is None
                    else self._options.voxel)
@@ -784,6 +782,14 @@ class Registrar:
         for stage, s in entry.seconds.items():
           seconds[stage] += s
       entries.append(entry)
+    if self._options.level != 'none':
+      # Each pair levelled and registered as `register` does, from the clouds kept on the
+      # grid (their features depend on the pair's levelling: not kept).
+      reg, f1, f2 = register(target=entries[0].points.points, source=entries[1].points.points,
+                             model=self._model, options=dataclasses.replace(self._options,
+                                                                             voxel=0.0))
+      reg.seconds = {**seconds, **reg.seconds}
+      return reg, f1, f2
     levels = [e.features for e in entries]
     lazy = ('keypoints', 'descriptors')   # what the clouds' levels have cost until now
     before = {stage: sum(f.seconds[stage] for f in levels) for stage in lazy}
