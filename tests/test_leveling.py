@@ -40,6 +40,9 @@ def test_level_finds_the_tilt_of_a_real_scan_and_turns_its_ground_onto_z(scan):
     assert np.degrees(np.arccos(np.clip(lv.normal @ expected, -1, 1))) < 1.0, (deg_x, deg_y)
     assert leveling.level(lv.apply(tilted)).tilt_deg < 0.5
     np.testing.assert_allclose(lv.undo(lv.apply(tilted[:100])), tilted[:100], atol=1e-9)
+  # A scan too sparse to judge (a far unit's few hundred ground points) is used as it is.
+  sparse = leveling.level(scan[::25] @ _tilt(20.0, 0.0).T)
+  assert sparse.sparse and not sparse.turned and not sparse.note
   # A corridor of walls and a blob: no ground, said so.
   for no_ground in (_walls(), np.random.default_rng(0).normal(0, 5, (5000, 3))):
     lv = leveling.level(no_ground)

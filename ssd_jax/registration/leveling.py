@@ -26,9 +26,16 @@ MAX_TILT_DEG = 45.0
 MIN_SENSOR_HEIGHT = 0.5
 # Metres: a point this close to the plane is on it.
 PLANE_DISTANCE = 0.15
-# The ground holds at least this share of the scan's points and MIN_GROUND_POINTS.
+# The ground holds at least this share of the scan's points and MIN_GROUND_POINTS (a real
+# far sparse re-scan's best plane held 202 points, 15 degrees off; the tilted re-scans'
+# grounds hold 556 or more).
 MIN_GROUND_SHARE = 0.1
-MIN_GROUND_POINTS = 200
+MIN_GROUND_POINTS = 400
+# A scan with fewer points is used as it is: a sparse unit far away returns a few hundred
+# ground points at most, too few to tell a missing ground from one it barely saw (real
+# cross-sensor re-scans of 576-1,042 points found none, or a wrong plane; tilted re-scans
+# of 2,000-3,000 points show theirs).
+MIN_POINTS_TO_LEVEL = 1500
 # Points the plane is sought among (an even stride), and RANSAC's samples.
 SEARCH_POINTS = 20_000
 TRIALS = 300
@@ -38,12 +45,13 @@ TRIALS = 300
 class Leveling:
   """The turn that levels one cloud: rotation [3, 3] about `center` [3] (metres), the
   ground's normal [3] before it, the tilt in degrees; `note` is '' or the one line saying
-  why the cloud was left as it is."""
+  that no ground was found (the cloud is left as it is)."""
   rotation: np.ndarray
   center: np.ndarray
   normal: np.ndarray
   tilt_deg: float
   note: str = ''
+  sparse: bool = False   # too few points to look for its ground: used as it is
 
   @property
   def turned(self) -> bool:
@@ -146,7 +154,10 @@ def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
   """The `Leveling` of a scan (points [N, 3] metres; `sensor_at_origin` as for `ground`):
   the turn about `center` (default the origin) that makes its ground horizontal; no turn
   where the ground is tilted by less than `min_tilt_deg`, or where none is found (then
-  `note` says so)."""
+  `note` says so). A scan of fewer than MIN_POINTS_TO_LEVEL points is used as it is
+  (`sparse` set, no note)."""
+  if len(points) < MIN_POINTS_TO_LEVEL:
+    return dataclasses.replace(unchanged(center), sparse=True)
   found = ground(points, sensor_at_origin, seed)
   if found is None:
     return unchanged(center, 'no ground plane found to level it by (a plane below the '

@@ -614,7 +614,10 @@ def _leveling(clouds, offset, options: Options, names):
                           sensor_at_origin=not offset.any()) for c in clouds]
   notes = []
   for name, lv in zip(names, level):
-    if lv.note:
+    if lv.sparse:
+      notes.append(f'{name}: too few points to find its ground '
+                   f'(< {leveling.MIN_POINTS_TO_LEVEL:,}); used as it is')
+    elif lv.note:
       notes.append(f'{name}: {lv.note}; registered with FPFH and RANSAC over any rotation')
     elif lv.turned:
       notes.append(f'{name}: levelled, its ground {lv.tilt_deg:.1f} degrees off horizontal')
