@@ -81,5 +81,5 @@ def test_ci_runs_exactly_the_readme_test_command():
   assert ci[-1] == commands[1]
 
 
-def test_readme_is_a_guide_of_at_most_250_lines():
-  assert len((ROOT / "README.md").read_text().splitlines()) <= 250
+def test_readme_is_a_guide_of_at_most_200_lines():
+  assert len((ROOT / 'README.md').read_text().splitlines()) <= 200
