@@ -39,6 +39,12 @@ def get_config() -> ml_collections.ConfigDict:
   data.rescan_sensors = ('vlp16', 'hdl32', 'hdl64', 'vls128', 'front120')
   data.rescan_shift = (2.0, 30.0)
   data.rescan_views = 8          # re-scans per cloud (made once, cached)
+  # Two-view training: with chance pairs_rate per row, the second branch is a real second
+  # scan of the place, moved into the first's frame by the transform the miner found
+  # (experiments.mine; datasets.MinedPairDataset). `pairs`: the miner's CSV ('' = off,
+  # the paper). Still no label: the transform comes from the project's own registration.
+  data.pairs = ''
+  data.pairs_rate = 0.5
 
   config.model = model = ml_collections.ConfigDict()
   model.descriptor_dim = 32      # D in {16, 32, 64, 128}

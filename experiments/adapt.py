@@ -1,20 +1,26 @@
-r"""Adapt a trained descriptor to your own sensor without labels: fine-tune it on a folder
-of unlabeled scans, then export it with a model card.
+r"""Adapt a trained descriptor to your own sensor without labels: mine pairs of your scans,
+fine-tune on them, then export the model with a model card.
 
-    python -m experiments.adapt --scans=/data/my_scans --out=exports/my_sensor \
-        [--init=ours] [--steps=1500] [--config=configs/adapt.py]
+    python -m experiments.adapt --scans=/data/my_drive --out=exports/my_sensor \
+        [--pairs=auto|none|MINED.csv] [--init=ours] [--steps=1500] [--config=configs/adapt.py]
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin --descriptor=learned \
         --checkpoint=exports/my_sensor
 
 The scans (.bin/.npy/.ply/.pcd/.las/.laz, one sweep each, centred on the sensor, z up)
-train the self-supervised objective of the paper, which needs no poses. OUT/run holds
-the training run (rerun the command to resume it); OUT holds the exported model
-(config.json, weights.msgpack) and MODEL_CARD.md (base model, scans, steps, wall time,
-machine, command). Under 10 minutes on 2 CPU cores at the default
-1,500 steps (docs/notes/benchmarks.md).
+are read in name order as a drive. `--pairs=auto` first mines pairs of them
+(`experiments.mine`: the classical registration, kept where its poses close loops; no
+pose is read) into OUT/mined_pairs.csv, then trains the paper's objective with half of
+each batch's second branches a real second scan moved by the mined transform (two-view
+training, `datasets.MinedPairDataset`) and half the paper's turned copy. Where no pair
+passes (scans not in capture order), and with `--pairs=none`, it trains the paper's
+single-scan objective alone. OUT/run holds the training run (rerun the command to
+resume it, mining too); OUT holds the exported model (config.json, weights.msgpack) and
+MODEL_CARD.md (base model, scans, pairs, steps, wall time, machine, command).
+docs/notes/benchmarks.md times it on 2 CPU cores.
 """
 
 import datetime
+import functools
 import os
 import platform
 import sys
@@ -22,28 +28,33 @@ import time
 
 from absl import app
 from absl import flags
+from tqdm import auto as tqdm
 
 from ssd_jax import cli, pretrained, train
-from ssd_jax.data import io
+from ssd_jax.data import clean, io, mined_pairs
 from ssd_jax.logging_utils import quiet_libraries
+from ssd_jax.registration import mining
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('scans', None, 'Folder (or index .txt) of unlabeled scans of the sensor.')
 flags.DEFINE_string('out', None, 'Output folder: the exported model, its card, and run/.')
 flags.DEFINE_string('init', 'ours', 'Model to start from: a shipped name, export or run.')
 flags.DEFINE_integer('steps', None, 'Training steps (default: the config\'s).')
+flags.DEFINE_string('pairs', 'auto', 'auto: mine pairs of the scans first (OUT/mined_pairs.csv); '
+                    "none: the paper's single-scan objective alone; or a miner's CSV.")
 cli.define_config_file('config', 'configs/adapt.py', 'Adaptation config.')
 flags.mark_flags_as_required(['scans', 'out'])
 
 CARD = """# {name}: `{init}` adapted to the scans of {scans}
 
-Fine-tuned without labels (the paper's self-supervision: each scan against a turned,
-re-sampled copy of itself) from `{init}`, every weight, on {num_scans} unlabeled scans.
+Fine-tuned without labels from `{init}`, every weight, on {num_scans} unlabeled scans:
+{objective}
 
 | | |
 |---|---|
 | base model | `{init}` |
 | scans | `{scans}` ({num_scans} files) |
+| mined pairs | {pairs} |
 | config | `configs/adapt.py` ({steps} steps, learning rate {lr:g}, {schedule}) |
 | wall time | {minutes:.1f} minutes |
 | machine | {machine} |
@@ -58,6 +69,34 @@ Use it: `--checkpoint={out}` (register, evaluate, learning_curve) or
 """
 
 
+SINGLE_OBJECTIVE = ("the paper's self-supervision, each scan against a turned, re-sampled "
+                    'copy of itself.')
+PAIRS_OBJECTIVE = ("the paper's self-supervision with {rate:.0%} of the second branches a real "
+                   'second scan of the place, moved into the first by the transform the '
+                   'miner found (two-view training); the rest a turned copy of the scan.')
+
+
+def _pairs(scans: list[str]) -> tuple[str, str]:
+  """The miner's CSV to train on ('' for none) and the model card's line about it."""
+  if FLAGS.pairs == 'none':
+    return '', 'none (`--pairs=none`)'
+  path = FLAGS.pairs
+  if FLAGS.pairs == 'auto':
+    os.makedirs(FLAGS.out, exist_ok=True)
+    path = os.path.join(FLAGS.out, 'mined_pairs.csv')
+    with tqdm.tqdm(total=len(mining.candidate_pairs(len(scans))), desc='mining pairs',
+                   unit='pair') as bar:
+      pairs = mining.mine_to_file(path, scans, functools.partial(clean.read_metres, fmt='auto'),
+                                  progress=bar.update, say=bar.write,
+                                  workers=mining.DEFAULT_WORKERS)
+    if not any(p.kept for p in pairs):
+      print(f'no pair of {FLAGS.scans} passed the miner\'s gate (are the scans in capture '
+            "order?): training the paper's single-scan objective alone")
+      return '', f'none of {len(pairs)} candidates passed the gate'
+  kept = mined_pairs.read_kept(path)
+  return path, f'{len(kept)} (`{path}`)'
+
+
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
@@ -68,13 +107,18 @@ def main(argv):
     config.train.num_steps = FLAGS.steps
   run_dir = os.path.join(FLAGS.out, 'run')
   try:
-    num_scans = len(io.list_clouds(FLAGS.scans))
+    scans = [str(p) for p in io.list_clouds(FLAGS.scans)]
+    num_scans = len(scans)
     start = time.perf_counter()
+    config.data.pairs, pairs_line = _pairs(scans)
+    objective = (PAIRS_OBJECTIVE.format(rate=config.data.pairs_rate) if config.data.pairs
+                 else SINGLE_OBJECTIVE)
     train.train_and_evaluate(config, run_dir)
     minutes = (time.perf_counter() - start) / 60
     card = CARD.format(
         name=os.path.basename(os.path.normpath(FLAGS.out)), init=FLAGS.init, scans=FLAGS.scans,
-        num_scans=num_scans, steps=config.train.num_steps, lr=config.train.learning_rate,
+        num_scans=num_scans, objective=objective, pairs=pairs_line,
+        steps=config.train.num_steps, lr=config.train.learning_rate,
         schedule=config.train.lr_schedule, minutes=minutes,
         machine=', '.join(filter(None, (platform.machine(), platform.processor(),
                                         f'{os.cpu_count()} cores', platform.system()))),

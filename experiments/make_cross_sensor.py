@@ -34,6 +34,9 @@ flags.DEFINE_string('scans_of', None, 'Instead of the test sets: write unlabeled
                     'to OUT, e.g. to adapt a model to it (experiments.adapt).')
 flags.DEFINE_integer('num_scenes', 3, 'With --scans_of: scenes driven through (a scan every '
                      '6 m, ~65 per scene).')
+flags.DEFINE_string('poses', None, 'With --scans_of: also write the scans\' ground-truth '
+                    'poses to this file (outside OUT; KITTI layout, one line per scan in '
+                    'sorted order), to measure labels mined from them (experiments.mine).')
 cli.define_config_file('config', 'configs/data/cross_sensor.py', 'Cross-sensor data config.')
 
 
@@ -66,7 +69,7 @@ def main(argv):
     sensors.get(FLAGS.scans_of)
     with tqdm.tqdm(desc=f'{FLAGS.scans_of} scans', unit='scan') as bar:
       n = cross_sensor.write_sensor_scans(config, FLAGS.scans_of, out, FLAGS.num_scenes,
-                                          progress=bar.update)
+                                          progress=bar.update, poses_out=FLAGS.poses)
     print(f'wrote {out}: {n} unlabeled {FLAGS.scans_of} scans')
     return
   cross_sensor.check_config(config)

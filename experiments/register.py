@@ -45,7 +45,8 @@ flags.DEFINE_integer('verify', DEFAULTS.verify, "Check RANSAC's this many distin
 flags.DEFINE_integer('bev', DEFAULTS.bev, "Also check the bird's-eye-view search's this many "
                      'best poses (needs --ransac=upright and --verify > 0).')
 flags.DEFINE_list('descriptor', [DEFAULTS.descriptor], 'learned, fpfh; a list runs each.')
-flags.DEFINE_enum('level', DEFAULTS.level, pipeline.LEVELS, 'ground: level tilted scans first.')
+flags.DEFINE_enum('level', DEFAULTS.level, pipeline.LEVELS,
+                  'ground: level each tilted scan by its ground first; none: take z as up.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: ours, or '
                     'ours_detector for learned keypoints).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding the pairs (optional).')

@@ -5,6 +5,7 @@ failure is a `ConfigError` whose message names the field and the value."""
 from __future__ import annotations
 
 import json
+import os
 
 import jax
 import ml_collections
@@ -79,6 +80,14 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
     require(d.rescan_views >= 1, f'data.rescan_views must be >= 1, got {d.rescan_views}')
     require(config.objective == 'self_supervised',
             f'data.rescan_rate is for the self-supervised objective, not {config.objective!r}')
+  if d.get('pairs'):
+    require(0 < d.pairs_rate <= 1, f'data.pairs_rate must be in (0, 1], got {d.pairs_rate}')
+    require(os.path.isfile(d.pairs), f'data.pairs: no such file {d.pairs!r} (experiments.mine '
+            'writes it)')
+    require(d.rescan_rate == 0, 'data.pairs and data.rescan_rate are two different second '
+            'views: set one of them')
+    require(config.objective == 'self_supervised',
+            f'data.pairs is for the self-supervised objective, not {config.objective!r}')
   require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
   require(d.num_points >= m.num_clusters,
           f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '

@@ -30,6 +30,8 @@ RUN_KEYS = {
     ('model', 'branch_fov_rate'): 0.0,
     ('model', 'branch_fov'): [90.0, 180.0],
     ('data', 'rescan_rate'): 0.0,
+    ('data', 'pairs'): '',
+    ('data', 'pairs_rate'): 0.5,
     ('train', 'lr_schedule'): 'constant',
     ('train', 'init_scope'): 'descriptor',
     # Runs from before the inference section described as they trained, on 0.2 m grids.

@@ -25,7 +25,7 @@ from tqdm import auto as tqdm
 
 from ssd_jax import checkpoint, config_checks, distributed, errors, network, objective, pretrained
 from ssd_jax.config_checks import ConfigError
-from ssd_jax.data import datasets
+from ssd_jax.data import datasets, io, mined_pairs
 
 
 class TrainingDiverged(errors.UserError, FloatingPointError):
@@ -264,6 +264,10 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
                      min_points=config.data.min_points)
   if config.objective == 'triplet':
     dataset = triplet_dataset(config)
+  elif config.data.pairs:
+    dataset = datasets.MinedPairDataset(
+        io.list_clouds(config.data.path), mined_pairs.read_kept(config.data.pairs),
+        rate=config.data.pairs_rate, **data_kwargs)
   elif config.data.rescan_rate > 0:
     d = config.data
     dataset = datasets.RescanPairDataset.from_source(

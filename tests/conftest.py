@@ -8,7 +8,7 @@ import pytest
 
 from ssd_jax import cli
 from ssd_jax.configs import paper_small
-from ssd_jax.configs.data import synthetic
+from ssd_jax.configs.data import cross_sensor, synthetic
 from ssd_jax.synthetic import dataset
 
 # The tests in this process load what an earlier one compiled, as the commands they start
@@ -42,6 +42,18 @@ def tiny_synthetic_config(seed=0):
   config.clusters.num_scenes = 1
   config.clusters.num_pairs = 6
   config.clusters.min_points = 16
+  return config
+
+
+def tiny_cross_sensor_config():
+  """`tiny_synthetic_config` with a cross-sensor section: VLP-16 and front120 against the
+  HDL-64E, 5-20 m apart, one pair per cell of one scene."""
+  config = tiny_synthetic_config()
+  config.cross_sensor = cross_sensor.get_config().cross_sensor
+  config.cross_sensor.sensors = ('vlp16', 'front120')
+  config.cross_sensor.distance_bins = ((5.0, 10.0), (10.0, 20.0))
+  config.cross_sensor.num_scenes = 1
+  config.cross_sensor.pairs_per_cell = 1
   return config
 
 

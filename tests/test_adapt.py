@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from ssd_jax import pretrained
-from ssd_jax.data import io, registration_sets
+from ssd_jax.data import io, mined_pairs, registration_sets
 from ssd_jax.registration import metrics, pipeline
+from ssd_jax.synthetic import cross_sensor
+from tests.conftest import tiny_cross_sensor_config
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -19,8 +21,12 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 @pytest.mark.multiprocess
 @pytest.mark.slow
 def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_path):
-  out = tmp_path / 'mine'
-  cmd = [sys.executable, '-m', 'experiments.adapt', f'--scans={synthetic_root / "train" / "00"}',
+  out, scans = tmp_path / 'mine', tmp_path / 'drive'
+  cross_sensor.write_sensor_scans(tiny_cross_sensor_config(), 'vlp16', scans, num_scenes=1,
+                                  spacing=10.0)
+  for f in sorted(scans.glob('*.bin'))[4:]:   # 4 scans of a drive, 10 m apart
+    f.unlink()
+  cmd = [sys.executable, '-m', 'experiments.adapt', f'--scans={scans}',
          f'--out={out}', '--steps=2', '--config.train.checkpoint_every=1',
          '--config.data.num_points=512', '--config.model.num_clusters=64',
          '--config.progress_bar=False']
@@ -29,6 +35,10 @@ def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_pat
   assert f'wrote {out}: ours adapted on' in run.stdout
   card = (out / 'MODEL_CARD.md').read_text()
   assert '| base model | `ours` |' in card and '2 steps' in card and 'experiments.adapt' in card
+  # The drive's pairs were mined first and trained on.
+  kept = mined_pairs.read_kept(str(out / 'mined_pairs.csv'))
+  assert f'| mined pairs | {len(kept)} (`{out / "mined_pairs.csv"}`) |' in card
+  assert 'two-view training' in card
   adapted, ours = pretrained.load(str(out)), pretrained.load('ours')
   assert adapted.step == 2
   # Every weight starts from ours (init_scope 'model'), the detector's too, and moved a little.

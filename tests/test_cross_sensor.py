@@ -11,29 +11,20 @@ from scipy import spatial
 
 from ssd_jax import sensors
 from ssd_jax.configs.evals import cross_sensor as cross_sensor_eval
-from ssd_jax.configs.data import cross_sensor as cross_sensor_data
 from ssd_jax.data import io, registration_sets, rescan
 from ssd_jax.evaluation import evaluators, feature_store
 from ssd_jax.synthetic import cross_sensor, dataset
-from tests.conftest import shared_path, tiny_synthetic_config
+from tests.conftest import shared_path, tiny_cross_sensor_config
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def _tiny_config():
-  config = tiny_synthetic_config()
-  config.cross_sensor = cross_sensor_data.get_config().cross_sensor
-  config.cross_sensor.sensors = ('vlp16', 'front120')
-  config.cross_sensor.distance_bins = ((5.0, 10.0), (10.0, 20.0))
-  config.cross_sensor.num_scenes = 1
-  config.cross_sensor.pairs_per_cell = 1
-  return config
 
 
 @pytest.fixture(scope='module')
 def tiny_set(tmp_path_factory):
   out = tmp_path_factory.mktemp('cross') / 'synthetic'
-  cross_sensor.generate(_tiny_config(), out)
+  cross_sensor.generate(tiny_cross_sensor_config(), out)
   return out
 
 
@@ -64,8 +55,8 @@ def test_synthetic_pairs_have_their_units_distances_and_exact_poses(tiny_set):
     if meta['sensor2'] == 'front120':   # a 120-degree sector in its own frame
       assert np.abs(np.degrees(np.arctan2(c2[:, 1], c2[:, 0]))).max() < 61
   # The same config reuses the set; another one is refused.
-  assert cross_sensor.generate(_tiny_config(), tiny_set)['reused']
-  other = _tiny_config()
+  assert cross_sensor.generate(tiny_cross_sensor_config(), tiny_set)['reused']
+  other = tiny_cross_sensor_config()
   other.cross_sensor.pairs_per_cell = 2
   with pytest.raises(dataset.SyntheticConfigError, match='different config'):
     cross_sensor.generate(other, tiny_set)
@@ -77,7 +68,7 @@ def test_synthetic_pairs_have_their_units_distances_and_exact_poses(tiny_set):
     ('distance_bins', ((5.0, 500.0),), 'longer than a drive'),
 ])
 def test_bad_cross_sensor_configs_are_refused(field, value, message):
-  config = _tiny_config()
+  config = tiny_cross_sensor_config()
   config.cross_sensor[field] = value
   with pytest.raises(dataset.SyntheticConfigError, match=message):
     cross_sensor.check_config(config)
@@ -132,7 +123,7 @@ def test_cross_sensor_evaluation_writes_the_matrix(tiny_set, tmp_path):
 
 
 def test_unlabeled_scans_of_one_unit(tmp_path):
-  n = cross_sensor.write_sensor_scans(_tiny_config(), 'vlp16', tmp_path, num_scenes=1,
+  n = cross_sensor.write_sensor_scans(tiny_cross_sensor_config(), 'vlp16', tmp_path, num_scenes=1,
                                       spacing=20.0)
   files = sorted(tmp_path.glob('*.bin'))
   assert n == len(files) >= 3
@@ -163,3 +154,24 @@ def test_row_names_parse_into_keypoints_descriptor_estimator_and_verification():
               'auto+fpfh+rigid+verify+bev', 'auto+fpfh+upright+bev'):
     with pytest.raises(ValueError, match='must be "keypoints\\+descriptor\\[\\+estimator'):
       feature_store.split_row(bad)
+
+
+def test_a_tilted_set_is_its_upright_twin_with_unit_2_tilted(tmp_path):
+  config = tiny_cross_sensor_config()
+  config.cross_sensor.sensors = ('vlp16',)
+  cross_sensor.generate(config, tmp_path / 'upright')
+  config.cross_sensor.tilt = (10.0, 30.0)
+  cross_sensor.generate(config, tmp_path / 'tilted')
+  upright = registration_sets.read_registration_set(tmp_path / 'upright')
+  tilted = registration_sets.read_registration_set(tmp_path / 'tilted')
+  assert len(upright) == len(tilted) == 2
+  for u, t in zip(upright, tilted):
+    # The same standpoints and yaw; only unit 2's frame turned about its own origin.
+    np.testing.assert_allclose(t.transform[:3, 3], u.transform[:3, 3], atol=1e-6)
+    turn = u.transform[:3, :3].T @ t.transform[:3, :3]
+    angle = np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1)))
+    assert 10.0 - 1e-6 <= angle <= 30.0 + 1e-6
+    assert abs(turn[2, 2] - np.cos(np.radians(angle))) < 1e-6   # about a horizontal axis
+  config.cross_sensor.tilt = (30.0, 10.0)
+  with pytest.raises(dataset.SyntheticConfigError, match='cross_sensor.tilt'):
+    cross_sensor.generate(config, tmp_path / 'bad')

@@ -17,7 +17,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from ssd_jax.data import clean, io, kitti, rescan
+from ssd_jax.data import clean, io, kitti, mined_pairs, rescan
 
 
 def crop(points: np.ndarray, radius: float) -> np.ndarray:
@@ -179,6 +179,67 @@ class RescanPairDataset:
 
 # Fewer points than this of a re-scan within the crop make it no second view.
 RESCAN_MIN_POINTS = 500
+
+
+class MinedPairDataset:
+  """Each training cloud beside a real second scan of the same place, for the
+  self-supervised objective's two-view training: with chance `rate` per row, a pair the
+  miner kept (`registration.mining`, `mined_pairs.read_kept`) in either direction, scan 2
+  moved into scan 1's frame by the mined T_12 and both cropped to the disk of
+  `crop_radius` around scan 1's sensor (the objective then turns the second view about z
+  as it turns a cloud's copy: the target rotation is still R_gt alone); otherwise a cloud
+  of `files` with itself (the paper's pair). The transform is the miner's: no pose or
+  label is read. A second view with fewer than `RESCAN_MIN_POINTS` points in the disk is
+  replaced by the first.
+  """
+
+  def __init__(self, files: Sequence[os.PathLike], pairs: Sequence[mined_pairs.MinedPair],
+               rate: float, fmt: str = 'auto', crop_radius: float = 20.0, min_points: int = 1,
+               cache_size: int = 1024):
+    if not pairs:
+      raise clean.CloudDataError('no mined pairs to train on')
+    self.clouds = CloudDataset(files, fmt=fmt, crop_radius=crop_radius, min_points=min_points)
+    names = sorted({p.cloud1 for p in pairs} | {p.cloud2 for p in pairs})
+    self.whole = CloudDataset(names, fmt=fmt, crop_radius=0.0, min_points=min_points)
+    self._index = {name: n for n, name in enumerate(names)}
+    self.pairs, self.rate, self.crop_radius = list(pairs), rate, crop_radius
+    self._views = functools.lru_cache(maxsize=cache_size)(self._views_uncached)
+
+  def __len__(self) -> int:
+    return len(self.clouds)
+
+  def _views_uncached(self, k: int, flip: bool) -> tuple[np.ndarray, np.ndarray]:
+    pair = self.pairs[k]
+    first, second, t = pair.cloud1, pair.cloud2, np.asarray(pair.transform, np.float64)
+    if flip:
+      first, second, t = second, first, np.linalg.inv(t)
+    view1 = crop(self.whole.cloud(self._index[first]), self.crop_radius)
+    moved = self.whole.cloud(self._index[second]).astype(np.float64) @ t[:3, :3].T + t[:3, 3]
+    view2 = crop(moved.astype(np.float32), self.crop_radius)
+    return view1, view2 if len(view2) >= RESCAN_MIN_POINTS else view1
+
+  def views(self, k: int, flip: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Mined pair k (scan 2 first if `flip`): ([M1, 3], [M2, 3]) float32 metres, both in
+    the first scan's frame, cropped around its sensor."""
+    return self._views(k, bool(flip))
+
+  def batch(self, seed: int, step: int, batch_size: int, num_points: int,
+            rows: Sequence[int] | None = None) -> np.ndarray:
+    """Rows `rows` (default all) of the batch of `step`: [len(rows), 2, num_points, 3]
+    float32 (a cloud, its second view). Row r draws from its own stream (seed, step, r, 3);
+    the paper's rows visit `files` as `CloudDataset.batch` does."""
+    rows = range(batch_size) if rows is None else rows
+    out = np.empty((len(rows), 2, num_points, 3), np.float32)
+    for k, slot in enumerate(rows):
+      rng = np.random.default_rng((seed, step, slot, 3))
+      if rng.uniform() < self.rate:
+        view1, view2 = self.views(int(rng.integers(len(self.pairs))), bool(rng.integers(2)))
+        out[k, 0], out[k, 1] = subsample(rng, view1, num_points), subsample(rng, view2,
+                                                                            num_points)
+      else:
+        i = epoch_member(seed, step * batch_size + slot, len(self.clouds))
+        out[k, 0] = out[k, 1] = subsample(rng, self.clouds.cloud(i), num_points)
+    return out
 
 
 TRIPLET_AXES = ('scene', 'stored')

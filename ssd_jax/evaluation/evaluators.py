@@ -91,7 +91,7 @@ class Context:
     path, pairs = self.find(candidates, registration_sets.read_registration_set, 'registration set')
     max_pairs = self.config.max_pairs
     pairs = pairs[:max_pairs] if max_pairs else pairs
-    return pairs, f'{path} ({len(pairs)} pairs)'
+    return self.store.in_levelled_frames(pairs), f'{path} ({len(pairs)} pairs)'
 
 
 def _registration(name, ev, ctx: Context) -> Section:
@@ -111,6 +111,7 @@ def _cross_sensor(name, ev, ctx: Context) -> Section:
                        registration_sets.read_pair_info(path))
   path, (pairs, info) = ctx.find(ev.dataset, read, 'cross-sensor set')
   pairs = pairs[:ctx.config.max_pairs] if ctx.config.max_pairs else pairs
+  pairs = ctx.store.in_levelled_frames(pairs)
   cfg, rows = ctx.config, list(ev.rows)
   store_rows = [r for r in rows if r not in cross_sensor.CLOUD_ROWS]
   with open(ctx.workdir / f'{name}_pairs.jsonl', 'w') as log:
@@ -284,7 +285,8 @@ def _evaluate(config: ml_collections.ConfigDict, workdir: Path, command: str,
   evals = ordered_evals(config)
   models, missing = feature_store.load_models(config.checkpoints,
                                               feature_store.model_names(rows_needed(config)))
-  store = feature_store.FeatureStore(models, config.seed, config.fpfh_max_nn)
+  store = feature_store.FeatureStore(models, config.seed, config.fpfh_max_nn,
+                                     config.get('level', 'none'))
   workdir.mkdir(parents=True, exist_ok=True)
   ctx = Context(config, store, missing, workdir, Path(config.data_root or '.'))
   sections, skipped, seconds, ran = [], [], {}, []

@@ -11,6 +11,7 @@ test use the same keypoints and descriptors of the same clouds, so one
 from __future__ import annotations
 
 import collections
+import dataclasses
 import os
 import time
 from typing import Mapping, Sequence
@@ -20,7 +21,7 @@ import numpy as np
 from ssd_jax import errors, inference, pretrained
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
-from ssd_jax.registration import features as features_lib, pipeline
+from ssd_jax.registration import features as features_lib, leveling, pipeline
 from ssd_jax.registration import prepared as prepared_lib
 
 BUILTIN_KEYPOINTS = ('iss', 'random', 'auto')
@@ -142,12 +143,20 @@ class FeatureStore:
   """Clouds, keypoint indices and descriptors per (file, method), computed once.
 
   models: {checkpoint name: inference.Model}; seed: for `random` keypoints;
-  fpfh_max_nn: neighbour cap of FPFH's 4 m searches. `seconds` sums the time spent
+  fpfh_max_nn: neighbour cap of FPFH's 4 m searches; level: 'ground' levels each cloud as
+  it is read (`leveling.level`, as the register command's `--level=ground`: a scan tilted
+  3 degrees or more is turned about its sensor so that its ground is horizontal, one
+  without ground or too sparse is used as it is), and the pairs' ground truth is then
+  taken between the levelled clouds (`in_levelled_frames`). `seconds` sums the time spent
   per step ('keypoints:iss', 'descriptors:fpfh', ...).
   """
 
   def __init__(self, models: Mapping, seed: int = 0,
-               fpfh_max_nn: int = features_lib.FPFH_MAX_NN):
+               fpfh_max_nn: int = features_lib.FPFH_MAX_NN, level: str = 'none'):
+    if level not in pipeline.LEVELS:
+      raise errors.UserError(f'level must be one of {pipeline.LEVELS}, got {level!r}')
+    self.level = level
+    self._levelings: dict[str, leveling.Leveling] = {}
     self.models = dict(models)
     self.seed = seed
     self.fpfh_max_nn = fpfh_max_nn
@@ -166,8 +175,31 @@ class FeatureStore:
     """xyz [N, 3] metres, NaN rows dropped."""
     key = str(path)
     if key not in self._clouds:
-      self._clouds[key] = clean.clean_cloud(io.read_cloud(path), key)
+      points = clean.clean_cloud(io.read_cloud(path), key)
+      if self.level == 'ground':
+        t0 = time.perf_counter()
+        self._levelings[key] = lv = leveling.level(
+            points, min_tilt_deg=pipeline.LEVEL_MIN_TILT_DEG)
+        points = lv.apply(points).astype(np.float32)
+        self.seconds['level'] += time.perf_counter() - t0
+      self._clouds[key] = points
     return self._clouds[key]
+
+  def leveling(self, path: str | os.PathLike) -> leveling.Leveling:
+    """How `cloud(path)` was levelled (unchanged where it was not)."""
+    self.cloud(path)
+    return self._levelings.get(str(path), leveling.unchanged())
+
+  def in_levelled_frames(self, pairs: Sequence) -> list:
+    """`registration_sets.RegistrationPair`s with T_12 between the clouds as `cloud` gives
+    them: L1 T_12 L2^-1 where the store levels (the same pairs otherwise). The levelling
+    turns each scan about its sensor, so RTE and the geodesic RRE of a pose are the same
+    in either pair of frames."""
+    if self.level == 'none':
+      return list(pairs)
+    return [dataclasses.replace(p, transform=self.leveling(p.cloud1).matrix @ p.transform
+                                @ np.linalg.inv(self.leveling(p.cloud2).matrix))
+            for p in pairs]
 
   def prepared(self, path: str | os.PathLike) -> prepared_lib.PreparedCloud:
     """`cloud(path)` as the BEV search and the verification use it, kept for the last

@@ -24,6 +24,9 @@ MAX_TILT_DEG = 45.0
 # Metres: the ground lies at least this far below the sensor along its normal (a ceiling
 # or a roof lies above it).
 MIN_SENSOR_HEIGHT = 0.5
+# Degrees: a cloud with no ground below its origin is searched again as a cloud in a world
+# frame (a map tile), whose ground lies within this of z.
+OFF_SENSOR_MAX_TILT_DEG = 15.0
 # Metres: a point this close to the plane is on it.
 PLANE_DISTANCE = 0.15
 # The ground holds at least this share of the scan's points and MIN_GROUND_POINTS (a real
@@ -36,8 +39,10 @@ MIN_GROUND_POINTS = 400
 # cross-sensor re-scans of 576-1,042 points found none, or a wrong plane; tilted re-scans
 # of 2,000-3,000 points show theirs).
 MIN_POINTS_TO_LEVEL = 1500
-# Points the plane is sought among (an even stride), and RANSAC's samples.
-SEARCH_POINTS = 20_000
+# Points the plane is sought among (an even stride; a 0.2 m-grid scan holds 3,000-20,000:
+# more cost normals, not accuracy), and RANSAC's samples. The ground's share is counted
+# over every point.
+SEARCH_POINTS = 2_000
 TRIALS = 300
 
 
@@ -99,23 +104,30 @@ def rotation_onto_z(normal: np.ndarray) -> np.ndarray:
   return np.eye(3) + s * kx + (1.0 - c) * kx @ kx
 
 
-def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0
+def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
+           surface: icp.Surface | None = None, max_tilt_deg: float = MAX_TILT_DEG
            ) -> tuple[np.ndarray, float, int] | None:
   """The ground plane of a scan: points [N, 3] metres -> (unit normal [3] pointing up, the
   height of the sensor (else of the points' centroid) above the plane in metres, the
   plane's inlier count among the points searched), or None where no plane within
-  MAX_TILT_DEG of z holds MIN_GROUND_SHARE of the points (a scan of walls alone, a
+  `max_tilt_deg` of z holds MIN_GROUND_SHARE of the points (a scan of walls alone, a
   tunnel). With `sensor_at_origin` (a scan in its sensor's frame) the plane must also lie
-  MIN_SENSOR_HEIGHT below the sensor, which rules out a ceiling or a roof."""
+  MIN_SENSOR_HEIGHT below the sensor, which rules out a ceiling or a roof. `surface`: the
+  `icp.Surface` of the same points (in any translation), whose normals are then used and
+  kept for the ICP that aligns to it later."""
   points = np.asarray(points, np.float64)
-  pts = points[::preprocess.even_stride(len(points), SEARCH_POINTS)]
-  if not sensor_at_origin:
-    pts = pts - pts.mean(axis=0)
+  stride = preprocess.even_stride(len(points), SEARCH_POINTS)
+  pts = points[::stride]
+  centre = np.zeros(3) if sensor_at_origin else pts.mean(axis=0)
+  pts = pts - centre
   floor = MIN_SENSOR_HEIGHT if sensor_at_origin else -np.inf
   if len(pts) < MIN_GROUND_POINTS:
     return None
-  normals = icp.normals(pts)
-  cos_max = np.cos(np.deg2rad(MAX_TILT_DEG))
+  if surface is not None and len(surface.points) == len(points):
+    normals = surface.normals_at(np.arange(0, len(points), stride))
+  else:
+    normals = icp.normals(pts)
+  cos_max = np.cos(np.deg2rad(max_tilt_deg))
   steep = np.flatnonzero(np.abs(normals[:, 2]) >= cos_max)
   if len(steep) < 3:
     return None
@@ -142,23 +154,33 @@ def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0
   normal = icp.least_axis(np.cov((on - centroid).T)[None])[0]
   normal *= 1.0 if normal[2] >= 0 else -1.0
   height = float(-normal @ centroid)
-  count = int(np.sum(np.abs(pts @ normal + height) < PLANE_DISTANCE))
-  if (count < max(MIN_GROUND_POINTS, MIN_GROUND_SHARE * len(pts)) or height < floor
+  # Counted over every point: the searched share is only what finds the plane.
+  whole = points - centre
+  count = int(np.sum(np.abs(whole @ normal + height) < PLANE_DISTANCE))
+  if (count < max(MIN_GROUND_POINTS, MIN_GROUND_SHARE * len(points)) or height < floor
       or normal[2] < cos_max):
     return None
   return normal, height, count
 
 
 def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
-          min_tilt_deg: float = 0.0, sensor_at_origin: bool = True) -> Leveling:
-  """The `Leveling` of a scan (points [N, 3] metres; `sensor_at_origin` as for `ground`):
+          min_tilt_deg: float = 0.0, sensor_at_origin: bool = True,
+          surface: icp.Surface | None = None) -> Leveling:
+  """The `Leveling` of a scan (points [N, 3] metres; `sensor_at_origin`, `surface` as for
+  `ground`, a cloud without a ground below its origin searched again without that rule):
   the turn about `center` (default the origin) that makes its ground horizontal; no turn
   where the ground is tilted by less than `min_tilt_deg`, or where none is found (then
   `note` says so). A scan of fewer than MIN_POINTS_TO_LEVEL points is used as it is
   (`sparse` set, no note)."""
   if len(points) < MIN_POINTS_TO_LEVEL:
     return dataclasses.replace(unchanged(center), sparse=True)
-  found = ground(points, sensor_at_origin, seed)
+  found = ground(points, sensor_at_origin, seed, surface)
+  if found is None and sensor_at_origin:
+    # Perhaps no scan around its sensor (a map tile, a submap centred on its points): its
+    # ground need not lie below the origin, but such a cloud is in a near-level world
+    # frame, so its ground must be within OFF_SENSOR_MAX_TILT_DEG of z (a pitched scan of
+    # walls has steep planes to mistake for one).
+    found = ground(points, False, seed, surface, OFF_SENSOR_MAX_TILT_DEG)
   if found is None:
     return unchanged(center, 'no ground plane found to level it by (a plane below the '
                      f'sensor within {MAX_TILT_DEG:g} degrees of its z axis, holding '

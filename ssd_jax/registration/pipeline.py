@@ -508,11 +508,12 @@ class Options:
               model's (0.2 m), 0 every point as given.
   fpfh_max_nn FPFH's neighbour cap within its 4 m ball (0: none, the paper's).
   seed        RANSAC's (and random keypoints') seed.
-  level       LEVELS: 'none' (the clouds as given) or 'ground' (each scan whose ground is
-              tilted by LEVEL_MIN_TILT_DEG or more is first turned level, `leveling`; a
-              scan without a ground is registered with FPFH and RANSAC over any
-              rotation, and a note says so). In `register_many` each pair is then
-              registered as `register` does, its features not kept across pairs.
+  level       LEVELS: 'ground' (each scan whose ground is tilted by LEVEL_MIN_TILT_DEG or
+              more is first turned level about its sensor, `leveling`, and every pose
+              comes back in the scans' own frames; a pair with a scan of no ground is
+              registered with FPFH and RANSAC over any rotation, and a note says so) or
+              'none' (the clouds as given: z is taken to be up). `register_many` levels
+              each cloud once.
   """
   keypoints: str = 'auto'
   descriptor: str = 'learned'
@@ -524,7 +525,7 @@ class Options:
   voxel: float | None = None
   fpfh_max_nn: int = features.FPFH_MAX_NN
   seed: int = 0
-  level: str = 'none'
+  level: str = 'ground'
 
   def __post_init__(self):
     for name, allowed in (('keypoints', KEYPOINTS), ('descriptor', DESCRIPTORS),
@@ -540,9 +541,10 @@ class Options:
 
   @classmethod
   def paper(cls, descriptor: str = 'fpfh', **overrides) -> 'Options':
-    """The paper's protocol: ISS keypoints, RANSAC over any rotation, no verification."""
+    """The paper's protocol: ISS keypoints, RANSAC over any rotation, no verification,
+    the clouds as given."""
     return cls(**{'keypoints': 'iss', 'descriptor': descriptor, 'estimator': 'rigid',
-                  'verify': 0, 'bev': 0, **overrides})
+                  'verify': 0, 'bev': 0, 'level': 'none', **overrides})
 
   @property
   def bev_candidates(self) -> int:
@@ -605,13 +607,16 @@ def _finish(reg: Registration, cloud1, cloud2, options: Options, origin=None,
 LEVEL_MIN_TILT_DEG = 3.0
 
 
-def _leveling(clouds, offset, options: Options, names):
+def _leveling(clouds, offset, options: Options, names, surfaces=None):
   """Each cloud's `leveling.Leveling` (in its centred coordinates) where `options.level`
-  asks for it, and the one-line notes of what was done."""
+  asks for it, and the one-line notes of what was done. `surfaces`: each cloud's
+  `icp.Surface`, whose normals the ground search then shares."""
   if options.level == 'none':
-    return [leveling.unchanged(), leveling.unchanged()], []
+    return [leveling.unchanged() for _ in clouds], []
+  surfaces = [None] * len(clouds) if surfaces is None else surfaces
   level = [leveling.level(c - offset, min_tilt_deg=LEVEL_MIN_TILT_DEG,
-                          sensor_at_origin=not offset.any()) for c in clouds]
+                          sensor_at_origin=not offset.any(), surface=surface)
+           for c, surface in zip(clouds, surfaces)]
   notes = []
   for name, lv in zip(names, level):
     if lv.sparse:
@@ -701,9 +706,9 @@ def register(*, target: np.ndarray, source: np.ndarray, model=None,
 # Clouds `register_many` keeps: a KITTI-size scan costs ~5 MB (points, normals, KD-tree,
 # footprint, descriptors).
 CACHE_SIZE = 64
-# What `register_many` times per pair, in order: the first four only for a cloud met first.
-STAGES = ('read', 'grid', 'keypoints', 'descriptors', 'matching', 'ransac', 'bev', 'verify',
-          'icp', 'assess')
+# What `register_many` times per pair, in order: the first five only for a cloud met first.
+STAGES = ('read', 'grid', 'level', 'keypoints', 'descriptors', 'matching', 'ransac', 'bev',
+          'verify', 'icp', 'assess')
 
 
 @dataclasses.dataclass
@@ -720,18 +725,20 @@ class PairResult:
 
 @dataclasses.dataclass
 class _Cloud:
-  points: prepared.PreparedCloud   # on the grid, float64, the file's coordinates
-  features: FeatureLevels          # keypoints and descriptors as the pairs need them
-  seconds: dict                    # read / grid, once
+  points: prepared.PreparedCloud   # on the grid, float64, levelled (`Options.level`)
+  features: FeatureLevels          # keypoints and descriptors of `points`
+  seconds: dict                    # read / grid / level, once
+  level: leveling.Leveling         # how `points` was levelled
+  own: prepared.PreparedCloud      # on the grid in the file's coordinates (ICP, assessment)
 
 
 class Registrar:
   """Registers pairs of cloud files with one setting (`Options`), keeping the last
   `cache_size` clouds it met: each read (`read(path)` -> [N, 3] float64 metres, the
-  file's coordinates), put on the grid, described (its coarse level first, the rest when
-  a pair needs it) and prepared for the BEV search and the verification once. `say(line)`
-  gets the one-line notes (grid, keypoint fallbacks). `register_many` streams pairs
-  through one."""
+  file's coordinates), put on the grid, levelled (`Options.level`), described (its coarse
+  level first, the rest when a pair needs it) and prepared for the BEV search and the
+  verification once. `say(line)` gets the one-line notes (grid, levelling, keypoint
+  fallbacks). `register_many` streams pairs through one."""
 
   def __init__(self, read: Callable[[str], np.ndarray], *, model=None,
                options: Options | None = None, say: Callable[[str], None] = print,
@@ -760,11 +767,22 @@ class Registrar:
     t2 = time.perf_counter()
     if note:
       self._say(f'voxel: {os.path.basename(path)}: {note}')
+    name = os.path.basename(path)
+    offset = local_origin(points)
+    own = prepared.PreparedCloud(points)
+    # The ground search's normals are the verification's when the cloud is not turned.
+    (level,), notes = _leveling([points], offset, self._options, [name],
+                                [own.target] if self._options.level != 'none' else None)
+    level = dataclasses.replace(level, center=offset)   # found about the centred points
+    for line in notes:
+      self._say(line)
+    points = level.apply(points)
+    t3 = time.perf_counter()
     f = self.levels(points, self._options.keypoints)
     if f.note:
-      self._say(f'{os.path.basename(path)}: {f.note}')
-    self._kept[path] = _Cloud(prepared.PreparedCloud(points), f, {'read': t1 - t0,
-                                                                  'grid': t2 - t1})
+      self._say(f'{name}: {f.note}')
+    self._kept[path] = _Cloud(prepared.PreparedCloud(points) if level.turned else own, f,
+                              {'read': t1 - t0, 'grid': t2 - t1, 'level': t3 - t2}, level, own)
     if len(self._kept) > self._size:
       del self._kept[next(iter(self._kept))]
     return self._kept[path], True
@@ -785,10 +803,10 @@ class Registrar:
         for stage, s in entry.seconds.items():
           seconds[stage] += s
       entries.append(entry)
-    if self._options.level != 'none':
-      # Each pair levelled and registered as `register` does, from the clouds kept on the
-      # grid (their features depend on the pair's levelling: not kept).
-      reg, f1, f2 = register(target=entries[0].points.points, source=entries[1].points.points,
+    if any(e.level.note for e in entries):
+      # No ground to level one of them by: the pair as `register` takes it (FPFH, RANSAC
+      # over any rotation), from the clouds kept on the grid.
+      reg, f1, f2 = register(target=entries[0].own.points, source=entries[1].own.points,
                              model=self._model, options=dataclasses.replace(self._options,
                                                                              voxel=0.0))
       reg.seconds = {**seconds, **reg.seconds}
@@ -804,7 +822,11 @@ class Registrar:
       levels = levels + list(used)
     for stage in lazy:
       seconds[stage] = sum(f.seconds[stage] for f in levels) - before[stage]
-    reg = _finish(reg, entries[0].points, entries[1].points, self._options)
+    level = [e.level for e in entries]
+    if any(lv.turned for lv in level):   # back in the files' frames; the kept features stay
+      reg = _unlevel(reg, level)
+      f1, f2 = (dataclasses.replace(f, xyz=lv.undo(f.xyz)) for f, lv in zip((f1, f2), level))
+    reg = _finish(reg, entries[0].own, entries[1].own, self._options)
     reg.seconds = {**seconds, **reg.seconds}
     return reg, f1, f2
 

@@ -69,12 +69,15 @@ CONFIDENT_FITNESS = 0.5
 # the keypoints the right pose fits 1.0.
 
 
-def clearly_confident(poses: np.ndarray, fitness: np.ndarray) -> bool:
+def clearly_confident(poses: np.ndarray, fitness: np.ndarray,
+                      min_fitness: float | None = None) -> bool:
   """Whether the best of verified poses [k, 4, 4] (fitness [k], `verify`) fits at least
-  CONFIDENT_FITNESS with no distinct pose within FINE_MARGIN of it."""
+  `min_fitness` (default CONFIDENT_FITNESS) with no distinct pose within FINE_MARGIN of
+  it."""
+  min_fitness = CONFIDENT_FITNESS if min_fitness is None else min_fitness
   order = ransac.distinct_best(poses, fitness, 2)
   best = fitness[order[0]]
-  return bool(best >= CONFIDENT_FITNESS
+  return bool(best >= min_fitness
               and (len(order) < 2 or fitness[order[1]] < best - FINE_MARGIN))
 
 

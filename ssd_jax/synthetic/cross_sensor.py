@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from ssd_jax import geometry, sensors
-from ssd_jax.data import groundtruth, io, registration_sets
+from ssd_jax.data import groundtruth, io, kitti, registration_sets
 from ssd_jax.synthetic import dataset, lidar, scene as scene_lib, trajectory
 
 SPLIT = 5
@@ -52,6 +52,10 @@ def check_config(config) -> None:
       raise dataset.SyntheticConfigError(
           f'cross_sensor.distance_bins: {hi} m is longer than a drive of scene_length '
           f'{config.scene_length} m (less {2 * trajectory.MARGIN:.0f} m of margins)')
+  tilt = tuple(cfg.get('tilt', (0.0, 0.0)))
+  if len(tilt) != 2 or not 0 <= tilt[0] <= tilt[1] <= 90:
+    raise dataset.SyntheticConfigError(
+        f'cross_sensor.tilt must be (low, high) degrees with 0 <= low <= high <= 90, got {tilt}')
   if cfg.num_scenes < 1 or cfg.pairs_per_cell < 1:
     raise dataset.SyntheticConfigError('cross_sensor.num_scenes and pairs_per_cell must be >= 1')
 
@@ -69,6 +73,15 @@ def _pose_at_distance(rng, positions: np.ndarray, i: int, lo: float, hi: float) 
   d = np.linalg.norm(positions[:, :2] - positions[i, :2], axis=1)
   candidates = np.flatnonzero((d >= lo) & (d < hi))
   return int(rng.choice(candidates)) if len(candidates) else None
+
+
+def _tilt(rng: np.random.Generator, lo: float, hi: float) -> np.ndarray:
+  """[3, 3]: a turn by an angle drawn in [lo, hi] degrees about a random horizontal axis
+  (a unit mounted pitched or rolled, a robot on a slope)."""
+  angle, heading = np.radians(rng.uniform(lo, hi)), rng.uniform(-np.pi, np.pi)
+  axis = np.array([np.cos(heading), np.sin(heading), 0.0])
+  k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+  return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
 def count_pairs(config) -> int:
@@ -102,6 +115,7 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
   partial.mkdir(parents=True)
   cfg = config.cross_sensor
   models = {name: _sensor_model(config, name) for name in (cfg.reference, *cfg.sensors)}
+  tilt = tuple(cfg.get('tilt', (0.0, 0.0)))
   gts, rows, n = [], [], 0
   for scene_idx in range(cfg.num_scenes):
     seed = (int(config.seed), SPLIT, scene_idx)
@@ -128,6 +142,8 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
           yaw = pair_rng.uniform(-180.0, 180.0)
           pose2 = poses[j] @ geometry.make_transform(geometry.rotation_z(np.radians(yaw)),
                                                      np.zeros(3))
+          if tilt[1] > 0:   # drawn only then: an upright set keeps its draws
+            pose2 = pose2 @ geometry.make_transform(_tilt(pair_rng, *tilt), np.zeros(3))
           clouds = []
           for name, pose in ((cfg.reference, poses[i]), (sensor, pose2)):
             raw, _ = lidar.scan(raycaster, pose, models[name], pair_rng, calibration[name])
@@ -160,22 +176,30 @@ SCANS_SPLIT = 6   # scenes of `write_sensor_scans`: neither a training nor a tes
 
 def write_sensor_scans(config, sensor: str, out: str | os.PathLike, num_scenes: int = 3,
                        spacing: float = 6.0,
-                       progress: Callable[[int], None] | None = None) -> int:
+                       progress: Callable[[int], None] | None = None,
+                       poses_out: str | os.PathLike | None = None) -> int:
   """Unlabeled scans of one unit (`ssd_jax.sensors`) along drives through `num_scenes`
-  scenes of their own (split 6), a scan every `spacing` metres: OUT/<scene>_<k>.bin
-  (xyz + normals, 0.2 m voxel grid, the sensor's frame) and no poses, as a user's folder
-  of scans would be. -> the number of scans."""
+  scenes of their own (split 6), a scan every `spacing` metres, in capture order:
+  OUT/<scene>_<k>.bin (xyz + normals, 0.2 m voxel grid, the sensor's frame) and no poses,
+  as a user's folder of scans would be. `poses_out`: a file outside OUT to write their
+  ground-truth poses T_world_sensor to (KITTI's layout, one row-major 3 x 4 per scan in
+  the folder's sorted order; scene s's world shifted SCENE_APART * s metres along x, so
+  that no pose relates two scenes), for measuring what is mined from them
+  (`registration.mining.label_errors`). -> the number of scans."""
   dataset.check_config(config)
   model = _sensor_model(config, sensor)
   out = Path(out)
   out.mkdir(parents=True, exist_ok=True)
-  count = 0
+  count, all_poses = 0, []
   for scene_idx in range(num_scenes):
     seed = (int(config.seed), SCANS_SPLIT, scene_idx)
     rng = np.random.default_rng(seed)
     scene = scene_lib.make_scene(rng, config.scene_length, config.scene.clutter_scale,
                                  config.scene.varied_objects)
     poses = trajectory.drive(scene, rng, spacing, config.lidar.mount_height)
+    apart = poses.copy()
+    apart[:, 0, 3] += SCENE_APART * scene_idx
+    all_poses.append(apart)
     raycaster = lidar.Raycaster(scene)
     calibration = model.calibration(np.random.default_rng((*seed, 0)))
     for k, pose in enumerate(poses):
@@ -185,4 +209,9 @@ def write_sensor_scans(config, sensor: str, out: str | os.PathLike, num_scenes: 
       count += 1
       if progress is not None:
         progress(1)
+  if poses_out is not None:
+    kitti.write_poses(poses_out, np.concatenate(all_poses))
   return count
+
+
+SCENE_APART = 10_000.0   # metres between the worlds of two scenes' poses

@@ -1,0 +1,125 @@
+"""Label-free training pairs (registration.mining, data.mined_pairs) and the two-view
+training data made of them (datasets.MinedPairDataset)."""
+
+import dataclasses
+import functools
+
+import numpy as np
+import pytest
+from scipy import spatial
+
+from ssd_jax import errors, geometry
+from ssd_jax.data import clean, datasets, groundtruth, io, kitti, mined_pairs
+from ssd_jax.registration import mining
+from ssd_jax.synthetic import cross_sensor
+from tests.conftest import tiny_cross_sensor_config
+
+
+def _pose(yaw_deg, x, y):
+  return geometry.make_transform(geometry.rotation_z(np.radians(yaw_deg)), np.array([x, y, 0.0]))
+
+
+def _pair(poses, i, j, error=None):
+  t = geometry.invert_transform(poses[i]) @ poses[j]
+  if error is not None:
+    t = t @ error
+  return mined_pairs.MinedPair(f's{i}', f's{j}', j - i, t, 0.6, True)
+
+
+def test_candidate_pairs_follow_capture_order():
+  assert mining.candidate_pairs(5, (1, 2)) == [(0, 1), (0, 2), (1, 2), (1, 3), (2, 3), (2, 4),
+                                               (3, 4)]
+  with pytest.raises(errors.UserError, match='positive'):
+    mining.candidate_pairs(5, (0, 1))
+
+
+def test_the_gate_keeps_the_pairs_of_consistent_loops_only():
+  poses = [_pose(10 * k, 6.0 * k, 0.5 * k) for k in range(6)]
+  index = {f's{k}': k for k in range(6)}
+  shifted = _pose(0, 1.5, 0)   # a wrong label: 1.5 m off
+  pairs = [_pair(poses, 0, 1), _pair(poses, 1, 2), _pair(poses, 0, 2),
+           _pair(poses, 2, 3), _pair(poses, 3, 4), _pair(poses, 2, 4, error=shifted),
+           _pair(poses, 4, 5)]
+  pairs.append(dataclasses.replace(_pair(poses, 3, 5), confident=False,
+                                   reason='no confident pose'))
+  mining.apply_gate(pairs, index)
+  kept = {(p.cloud1, p.cloud2): p.kept for p in pairs}
+  # (0, 1, 2) closes; (2, 3, 4) does not (the long side is 1.5 m off); (4, 5) is in no loop.
+  assert kept == {('s0', 's1'): True, ('s1', 's2'): True, ('s0', 's2'): True,
+                  ('s2', 's3'): False, ('s3', 's4'): False, ('s2', 's4'): False,
+                  ('s4', 's5'): False, ('s3', 's5'): False}
+  assert {p.reason for p in pairs if not p.kept} == {'in no consistent loop',
+                                                     'no confident pose'}
+  rot, trans = mining.cycle_error(pairs[3].transform, pairs[4].transform, pairs[5].transform)
+  assert rot < 1e-6 and trans == pytest.approx(1.5)
+
+
+@pytest.fixture(scope='module')
+def drive(tmp_path_factory):
+  """The first 5 scans of a simulated VLP-16 drive (10 m apart), their poses, and the pairs
+  mined from them (gaps 1 and 2) into mined.csv with every pose reader made to fail."""
+  root = tmp_path_factory.mktemp('drive')
+  scans, truth = root / 'scans', root / 'poses.txt'
+  cross_sensor.write_sensor_scans(tiny_cross_sensor_config(), 'vlp16', scans, num_scenes=1,
+                                  spacing=10.0, poses_out=truth)
+  files = sorted(scans.glob('*.bin'))
+  for f in files[5:]:
+    f.unlink()
+  poses = kitti.read_poses(truth)[:5]
+  files = [str(f) for f in files[:5]]
+
+  def no_pose(*args, **kwargs):
+    raise AssertionError('mining or training read a pose')
+  with pytest.MonkeyPatch.context() as patch:
+    patch.setattr(kitti, 'read_poses', no_pose)
+    patch.setattr(groundtruth, 'read_groundtruths', no_pose)
+    path = str(root / 'mined.csv')
+    pairs = mining.mine_to_file(path, files, functools.partial(clean.read_metres, fmt='auto'),
+                                gaps=(1, 2), say=lambda s: None)
+    kept = mined_pairs.read_kept(path)
+    ds = datasets.MinedPairDataset(files, kept, rate=1.0, crop_radius=20.0)
+    batches = [ds.batch(0, 0, 4, 2048), ds.batch(0, 0, 4, 2048)]
+  return files, poses, path, pairs, ds, batches
+
+
+def test_mined_labels_are_right_and_read_no_pose(drive):
+  scans, poses, _, pairs, ds, batches = drive
+  kept = [p for p in pairs if p.kept]
+  assert len(pairs) == 7 and len(kept) >= 5
+  e = mining.label_errors(kept, poses, {s: n for n, s in enumerate(scans)})
+  assert e['success'].all() and np.median(e['rte']) < 0.2 and np.median(e['rre']) < 1.0
+  # Two-view training data: the second view lies on the first where the scans overlap.
+  assert batches[0].shape == (4, 2, 2048, 3)
+  np.testing.assert_array_equal(batches[0], batches[1])
+  view1, view2 = ds.views(0)
+  near = spatial.cKDTree(view1).query(view2, distance_upper_bound=0.5)[0]
+  assert np.isfinite(near).mean() > 0.3
+
+
+def test_workers_find_the_same_pairs_and_a_rerun_registers_none(drive, monkeypatch):
+  scans, _, path, pairs, _, _ = drive
+  calls = []
+  # Gap 1 of the first 4 scans, in 3 chunks over 2 processes: the poses found by one.
+  monkeypatch.setattr(mining, 'CHUNK', 1)
+  two = mining.mine(scans[:4], functools.partial(clean.read_metres, fmt='auto'), gaps=(1,),
+                    say=lambda s: None, workers=2)
+  one = {(p.cloud1, p.cloud2): p for p in pairs}
+  assert len(two) == 3
+  for p in two:
+    assert (p.confident, p.fitness) == (one[p.cloud1, p.cloud2].confident,
+                                        one[p.cloud1, p.cloud2].fitness)
+    np.testing.assert_array_equal(p.transform, one[p.cloud1, p.cloud2].transform)
+  again = mined_pairs.PairsFile(path)
+  assert set(again.done) == set(one)
+  mining.mine(scans, lambda p: calls.append(p) or clean.read_metres(p, 'auto'), gaps=(1, 2),
+              done=again.done, say=lambda s: None)
+  assert calls == []
+
+
+def test_a_file_that_is_not_mined_pairs_is_one_line(tmp_path):
+  bad = tmp_path / 'x.csv'
+  bad.write_text('a,b\n')
+  with pytest.raises(errors.UserError, match='not a file of mined pairs'):
+    mined_pairs.read_kept(str(bad))
+  with pytest.raises(errors.UserError, match='No such file'):
+    mined_pairs.read_kept(str(tmp_path / 'none.csv'))
