@@ -45,6 +45,8 @@ def get_config() -> ml_collections.ConfigDict:
   # the paper). Still no label: the transform comes from the project's own registration.
   data.pairs = ''
   data.pairs_rate = 0.5
+  data.pairs_weight = 'uniform'  # datasets.PAIR_WEIGHTS: each pair alike, or far ones oftener
+  data.pairs_links = 1           # >1: also pairs composed of up to this many mined ones
 
   config.model = model = ml_collections.ConfigDict()
   model.descriptor_dim = 32      # D in {16, 32, 64, 128}

@@ -89,6 +89,8 @@ def _pairs(scans: list[str]) -> tuple[str, str]:
       pairs = mining.mine_to_file(path, scans, functools.partial(clean.read_metres, fmt='auto'),
                                   progress=bar.update, say=bar.write,
                                   workers=mining.DEFAULT_WORKERS)
+      bar.total = bar.n   # the total counted every gap; mining stops at the first that fails
+      bar.refresh()
     if not any(p.kept for p in pairs):
       print(f'no pair of {FLAGS.scans} passed the miner\'s gate (are the scans in capture '
             "order?): training the paper's single-scan objective alone")

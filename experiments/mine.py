@@ -80,6 +80,8 @@ def main(argv):
                                 functools.partial(clean.read_metres, fmt=FLAGS.format),
                                 gaps=gaps, progress=bar.update, say=bar.write,
                                 workers=FLAGS.workers)
+    bar.total = bar.n   # the total counted every gap; mining stops at the first that fails
+    bar.refresh()
   print(f'wrote {FLAGS.out}: {sum(p.kept for p in pairs)} of {len(pairs)} candidate pairs '
         f'kept from {len(scans)} scans')
   print(report(pairs, scans, FLAGS.poses))

@@ -88,6 +88,10 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
             'views: set one of them')
     require(config.objective == 'self_supervised',
             f'data.pairs is for the self-supervised objective, not {config.objective!r}')
+    require(d.pairs_weight in datasets.PAIR_WEIGHTS,
+            f'data.pairs_weight must be one of {datasets.PAIR_WEIGHTS}, got {d.pairs_weight!r}')
+    require(isinstance(d.pairs_links, int) and d.pairs_links >= 1,
+            f'data.pairs_links must be a whole number >= 1, got {d.pairs_links!r}')
   require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
   require(d.num_points >= m.num_clusters,
           f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '

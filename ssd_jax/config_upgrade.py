@@ -32,6 +32,8 @@ RUN_KEYS = {
     ('data', 'rescan_rate'): 0.0,
     ('data', 'pairs'): '',
     ('data', 'pairs_rate'): 0.5,
+    ('data', 'pairs_weight'): 'uniform',
+    ('data', 'pairs_links'): 1,
     ('train', 'lr_schedule'): 'constant',
     ('train', 'init_scope'): 'descriptor',
     # Runs from before the inference section described as they trained, on 0.2 m grids.

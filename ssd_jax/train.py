@@ -266,8 +266,9 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
     dataset = triplet_dataset(config)
   elif config.data.pairs:
     dataset = datasets.MinedPairDataset(
-        io.list_clouds(config.data.path), mined_pairs.read_kept(config.data.pairs),
-        rate=config.data.pairs_rate, **data_kwargs)
+        io.list_clouds(config.data.path),
+        mined_pairs.chained(mined_pairs.read_kept(config.data.pairs), config.data.pairs_links),
+        rate=config.data.pairs_rate, weight=config.data.pairs_weight, **data_kwargs)
   elif config.data.rescan_rate > 0:
     d = config.data
     dataset = datasets.RescanPairDataset.from_source(

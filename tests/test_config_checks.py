@@ -39,6 +39,15 @@ def test_config_errors_name_the_value(tiny_config):
       config_checks.check_config(config)
 
 
+def _each_data_value_fails(config, cases):
+  """Each (data field, value, message) of `cases`, set alone on `config`, is refused."""
+  for name, value, message in cases:
+    bad = config.copy_and_resolve_references()
+    bad.data[name] = value
+    with pytest.raises(config_checks.ConfigError, match=message):
+      config_checks.check_config(bad)
+
+
 def test_rescan_pair_errors_name_the_value(tiny_config):
   tiny_config.data.rescan_rate = 0.5
   config_checks.check_config(tiny_config)
@@ -47,14 +56,22 @@ def test_rescan_pair_errors_name_the_value(tiny_config):
            ('rescan_sensors', (), 'rescan_sensors: unknown'),
            ('rescan_shift', (10.0, 5.0), 'rescan_shift must be'),
            ('rescan_views', 0, 'rescan_views must be >= 1')]
-  for name, value, message in cases:
-    config = tiny_config.copy_and_resolve_references()
-    config.data[name] = value
-    with pytest.raises(config_checks.ConfigError, match=message):
-      config_checks.check_config(config)
+  _each_data_value_fails(tiny_config, cases)
   tiny_config.objective = 'triplet'
   with pytest.raises(config_checks.ConfigError, match='for the self-supervised objective'):
     config_checks.check_config(tiny_config)
+
+
+def test_mined_pair_errors_name_the_value(tiny_config, tmp_path):
+  tiny_config.data.pairs = str(tmp_path / 'mined.csv')
+  with pytest.raises(config_checks.ConfigError, match='data.pairs: no such file'):
+    config_checks.check_config(tiny_config)
+  (tmp_path / 'mined.csv').write_text('')
+  config_checks.check_config(tiny_config)
+  cases = [('pairs_rate', 0.0, r'data.pairs_rate must be in \(0, 1\]'),
+           ('pairs_weight', 'far', "data.pairs_weight must be one of .*'far'"),
+           ('pairs_links', 0, 'data.pairs_links must be a whole number >= 1, got 0')]
+  _each_data_value_fails(tiny_config, cases)
 
 
 def test_batch_must_split_over_devices(tiny_config):

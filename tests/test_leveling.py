@@ -44,8 +44,10 @@ def test_level_finds_the_tilt_of_a_real_scan_and_turns_its_ground_onto_z(scan):
   # A scan too sparse to judge (a far unit's few hundred ground points) is used as it is.
   sparse = leveling.level(scan[::25] @ _tilt(20.0, 0.0).T)
   assert sparse.sparse and not sparse.turned and not sparse.note
-  # A corridor of walls and a blob: no ground, said so.
-  for no_ground in (_walls(), np.random.default_rng(0).normal(0, 5, (5000, 3))):
+  # A corridor of walls, a blob, the scan without its ground (a level band through its
+  # walls, poles and cars is no ground): no ground, said so.
+  for no_ground in (_walls(), np.random.default_rng(0).normal(0, 5, (5000, 3)),
+                    scan[scan[:, 2] > -1.2]):
     lv = leveling.level(no_ground)
     assert 'no ground plane found' in lv.note and not lv.turned
 
@@ -92,9 +94,18 @@ def test_tilted_scans_register_through_levelling_in_their_own_frames(scan, tmp_p
   source = (cloud2[up[:, 2] > -1.2] - steep[:3, 3]) @ steep[:3, :3]
   no_ground, _, _ = pipeline.register(target=cloud1, source=source, model=model,
                                       options=pipeline.Options(level='ground'))
-  assert any('no ground plane found' in n and 'RANSAC over any rotation' in n
-             for n in no_ground.notes), no_ground.notes
+  assert any('no ground plane found' in n for n in no_ground.notes), no_ground.notes
+  assert pipeline.ANY_ROTATION_NOTE in no_ground.notes, no_ground.notes
   assert metrics.registration_errors(move @ steep, no_ground.transform)['success']
+  # Without its ground but upright: registered as given, its verified pose clear.
+  yaw = geometry.make_transform(geometry.rotation_z(np.radians(40.0)), move[:3, 3])
+  groundless = scan[1::2][scan[1::2, 2] > -1.2]
+  groundless = (groundless - yaw[:3, 3]) @ yaw[:3, :3]
+  upright, _, _ = pipeline.register(target=cloud1, source=groundless, model=model,
+                                    options=pipeline.Options(level='ground'))
+  assert any('cloud 2: no ground plane found' in n for n in upright.notes), upright.notes
+  assert pipeline.UPRIGHT_NOTE in upright.notes, upright.notes
+  assert metrics.registration_errors(yaw, upright.transform)['success']
   # In a batch each cloud is levelled once and kept (put on the grid before it is levelled,
   # the one pair after: poses within millimetres).
   for name, cloud in (('a', cloud1), ('b', cloud2), ('c', source)):
@@ -108,6 +119,7 @@ def test_tilted_scans_register_through_levelling_in_their_own_frames(scan, tmp_p
   np.testing.assert_allclose(many[1].registration.transform, no_ground.transform, atol=5e-3)
   assert any('b.npy: levelled' in n for n in lines) and any(
       'c.npy: no ground plane found' in n for n in lines), lines
+  assert pipeline.ANY_ROTATION_NOTE in many[1].registration.notes
 
 
 def test_an_evaluation_levels_each_scan_and_takes_the_truth_between_levelled_scans(scan,

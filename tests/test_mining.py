@@ -96,6 +96,34 @@ def test_mined_labels_are_right_and_read_no_pose(drive):
   assert np.isfinite(near).mean() > 0.3
 
 
+def test_chained_pairs_are_right_and_far_pairs_are_drawn_by_distance(drive, monkeypatch):
+  scans, poses, _, pairs, _, _ = drive
+  near = [p for p in pairs if p.kept and p.gap == 1]
+  assert len(near) >= 3
+  chain = mined_pairs.chained(near, 3)
+  assert {p.gap for p in chain} == {1, 2, 3} and len(chain) > len(near)
+  e = mining.label_errors(chain, poses, {s: n for n, s in enumerate(scans)})
+  assert e['success'].all() and np.median(e['rte']) < 0.3, e
+  # A pair the miner kept stays as it found it; chaining them all adds only farther ones.
+  every = mined_pairs.chained([p for p in pairs if p.kept], 2)
+  for p in pairs:
+    if p.kept:
+      assert any(q is p for q in every)
+  # 'distance': each row picks a pair with chance in proportion to how far apart it is.
+  files = scans
+  far = datasets.MinedPairDataset(files, chain, rate=1.0, crop_radius=20.0, weight='distance')
+  picked = []
+  monkeypatch.setattr(far, 'views', lambda k, flip=False: (picked.append(k), (
+      np.zeros((2000, 3), np.float32),) * 2)[1])
+  for step in range(200):
+    far.batch(0, step, 4, 64)
+  apart = np.array([np.linalg.norm(p.transform[:3, 3]) for p in chain])
+  share = np.bincount(picked, minlength=len(chain)) / len(picked)
+  np.testing.assert_allclose(share, apart / apart.sum(), atol=0.04)
+  with pytest.raises(ValueError, match='weight must be one of'):
+    datasets.MinedPairDataset(files, chain, rate=1.0, weight='far')
+
+
 def test_workers_find_the_same_pairs_and_a_rerun_registers_none(drive, monkeypatch):
   scans, _, path, pairs, _, _ = drive
   calls = []

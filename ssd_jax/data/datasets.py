@@ -181,6 +181,9 @@ class RescanPairDataset:
 RESCAN_MIN_POINTS = 500
 
 
+PAIR_WEIGHTS = ('uniform', 'distance')
+
+
 class MinedPairDataset:
   """Each training cloud beside a real second scan of the same place, for the
   self-supervised objective's two-view training: with chance `rate` per row, a pair the
@@ -190,19 +193,26 @@ class MinedPairDataset:
   as it turns a cloud's copy: the target rotation is still R_gt alone); otherwise a cloud
   of `files` with itself (the paper's pair). The transform is the miner's: no pose or
   label is read. A second view with fewer than `RESCAN_MIN_POINTS` points in the disk is
-  replaced by the first.
+  replaced by the first. `weight`: PAIR_WEIGHTS, how a row picks its pair: 'uniform' (each
+  alike) or 'distance' (by how far apart its scans are: the far pairs, least like the
+  paper's turned copy, more often).
   """
 
   def __init__(self, files: Sequence[os.PathLike], pairs: Sequence[mined_pairs.MinedPair],
                rate: float, fmt: str = 'auto', crop_radius: float = 20.0, min_points: int = 1,
-               cache_size: int = 1024):
+               cache_size: int = 1024, weight: str = 'uniform'):
     if not pairs:
       raise clean.CloudDataError('no mined pairs to train on')
+    if weight not in PAIR_WEIGHTS:
+      raise ValueError(f'weight must be one of {PAIR_WEIGHTS}, got {weight!r}')
     self.clouds = CloudDataset(files, fmt=fmt, crop_radius=crop_radius, min_points=min_points)
     names = sorted({p.cloud1 for p in pairs} | {p.cloud2 for p in pairs})
     self.whole = CloudDataset(names, fmt=fmt, crop_radius=0.0, min_points=min_points)
     self._index = {name: n for n, name in enumerate(names)}
     self.pairs, self.rate, self.crop_radius = list(pairs), rate, crop_radius
+    apart = np.array([np.linalg.norm(p.transform[:3, 3]) for p in self.pairs])
+    self._chance = (apart / apart.sum() if weight == 'distance' and apart.sum() > 0
+                    else None)
     self._views = functools.lru_cache(maxsize=cache_size)(self._views_uncached)
 
   def __len__(self) -> int:
@@ -233,7 +243,9 @@ class MinedPairDataset:
     for k, slot in enumerate(rows):
       rng = np.random.default_rng((seed, step, slot, 3))
       if rng.uniform() < self.rate:
-        view1, view2 = self.views(int(rng.integers(len(self.pairs))), bool(rng.integers(2)))
+        pick = (rng.integers(len(self.pairs)) if self._chance is None
+                else rng.choice(len(self.pairs), p=self._chance))
+        view1, view2 = self.views(int(pick), bool(rng.integers(2)))
         out[k, 0], out[k, 1] = subsample(rng, view1, num_points), subsample(rng, view2,
                                                                             num_points)
       else:

@@ -64,15 +64,21 @@ def normals(points: np.ndarray, tree: spatial.cKDTree | None = None,
   dist, idx = tree.query(query, k=k, distance_upper_bound=radius, workers=-1)
   found = np.isfinite(dist)                                          # [M, k]
   count = found.sum(1)
-  # Neighbours relative to their point (precision far from the origin), 0 where missing.
-  rel = np.where(found[..., None], points[np.where(found, idx, 0)] - query[:, None], 0.0)
   n = np.maximum(count, 1).astype(np.float64)
-  mean = rel.sum(1) / n[:, None]
+  # Per coordinate, contiguous [M, k] (twice the speed of [M, k, 3] slices): neighbours
+  # relative to their point (precision far from the origin), 0 where missing (the tree's
+  # index len(points) then, a 0 appended).
+  rel = []
+  for i in range(3):
+    column = np.append(points[:, i], 0.0)[idx] - query[:, i, None]
+    column *= found
+    rel.append(column)
+  mean = [r.sum(1) / n for r in rel]
   cov = np.empty((len(query), 3, 3))
   for i in range(3):
     for j in range(i, 3):
-      cov[:, i, j] = cov[:, j, i] = (np.einsum('nk,nk->n', rel[..., i], rel[..., j]) / n
-                                     - mean[:, i] * mean[:, j])
+      cov[:, i, j] = cov[:, j, i] = (np.einsum('nk,nk->n', rel[i], rel[j]) / n
+                                     - mean[i] * mean[j])
   ok = count >= 3
   out[ok] = least_axis(cov[ok])
   return out

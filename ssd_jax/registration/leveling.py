@@ -27,8 +27,13 @@ MIN_SENSOR_HEIGHT = 0.5
 # Degrees: a cloud with no ground below its origin is searched again as a cloud in a world
 # frame (a map tile), whose ground lies within this of z.
 OFF_SENSOR_MAX_TILT_DEG = 15.0
-# Metres: a point this close to the plane is on it.
+# Metres: a point this close to the plane, whose own normal is within NORMAL_AGREEMENT_DEG
+# of the plane's, is on it. Without the normal rule a level band through the walls, poles
+# and cars of a scan without ground holds its 0.3 m / height share of them (12 % of a hall
+# of 4.5 m walls), and a plane slanted through distant walls or along a ring passes for a
+# tilted ground.
 PLANE_DISTANCE = 0.15
+NORMAL_AGREEMENT_DEG = 30.0
 # The ground holds at least this share of the scan's points and MIN_GROUND_POINTS (a real
 # far sparse re-scan's best plane held 202 points, 15 degrees off; the tilted re-scans'
 # grounds hold 556 or more).
@@ -39,9 +44,9 @@ MIN_GROUND_POINTS = 400
 # cross-sensor re-scans of 576-1,042 points found none, or a wrong plane; tilted re-scans
 # of 2,000-3,000 points show theirs).
 MIN_POINTS_TO_LEVEL = 1500
-# Points the plane is sought among (an even stride; a 0.2 m-grid scan holds 3,000-20,000:
-# more cost normals, not accuracy), and RANSAC's samples. The ground's share is counted
-# over every point.
+# Points the plane is sought and counted among (an even stride; a 0.2 m-grid scan holds
+# 3,000-20,000: more cost normals, not accuracy), and RANSAC's samples; a count among them
+# stands for stride times as many points of the scan.
 SEARCH_POINTS = 2_000
 TRIALS = 300
 
@@ -105,16 +110,13 @@ def rotation_onto_z(normal: np.ndarray) -> np.ndarray:
 
 
 def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
-           surface: icp.Surface | None = None, max_tilt_deg: float = MAX_TILT_DEG
-           ) -> tuple[np.ndarray, float, int] | None:
+           max_tilt_deg: float = MAX_TILT_DEG) -> tuple[np.ndarray, float, int] | None:
   """The ground plane of a scan: points [N, 3] metres -> (unit normal [3] pointing up, the
   height of the sensor (else of the points' centroid) above the plane in metres, the
-  plane's inlier count among the points searched), or None where no plane within
+  scan's points on it, estimated from those searched), or None where no plane within
   `max_tilt_deg` of z holds MIN_GROUND_SHARE of the points (a scan of walls alone, a
   tunnel). With `sensor_at_origin` (a scan in its sensor's frame) the plane must also lie
-  MIN_SENSOR_HEIGHT below the sensor, which rules out a ceiling or a roof. `surface`: the
-  `icp.Surface` of the same points (in any translation), whose normals are then used and
-  kept for the ICP that aligns to it later."""
+  MIN_SENSOR_HEIGHT below the sensor, which rules out a ceiling or a roof."""
   points = np.asarray(points, np.float64)
   stride = preprocess.even_stride(len(points), SEARCH_POINTS)
   pts = points[::stride]
@@ -123,10 +125,7 @@ def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
   floor = MIN_SENSOR_HEIGHT if sensor_at_origin else -np.inf
   if len(pts) < MIN_GROUND_POINTS:
     return None
-  if surface is not None and len(surface.points) == len(points):
-    normals = surface.normals_at(np.arange(0, len(points), stride))
-  else:
-    normals = icp.normals(pts)
+  normals = icp.normals(pts)
   cos_max = np.cos(np.deg2rad(max_tilt_deg))
   steep = np.flatnonzero(np.abs(normals[:, 2]) >= cos_max)
   if len(steep) < 3:
@@ -144,19 +143,29 @@ def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
   if not keep.any():
     return None
   n, height = n[keep], height[keep]
-  counts = np.sum(np.abs(pts @ n.T + height) < PLANE_DISTANCE, axis=0)
-  best = int(np.argmax(counts))
-  inliers = np.abs(pts @ n[best] + height[best]) < PLANE_DISTANCE
+  # Only points whose own normal is steep can be on a ground (float32: a 0.15 m band on
+  # centred points needs no more, and it halves the count's cost).
+  on_pts, on_normals = pts[steep].astype(np.float32), normals[steep].astype(np.float32)
+  agree = np.cos(np.deg2rad(NORMAL_AGREEMENT_DEG))
+
+  def on(normal, height):   # normal [3, P], height [P] -> [S, P] bool
+    return ((np.abs(on_pts @ normal + height) < PLANE_DISTANCE)
+            & (np.abs(on_normals @ normal) >= agree))
+
+  best = int(np.argmax(on(n.T.astype(np.float32), height.astype(np.float32)).sum(0)))
+  inliers = on(n[best, :, None].astype(np.float32), np.float32(height[best]))[:, 0]
+  if inliers.sum() < 3:
+    return None
   # Least squares over the inliers: the plane through their centroid, normal the least
   # principal axis.
-  on = pts[inliers]
-  centroid = on.mean(axis=0)
-  normal = icp.least_axis(np.cov((on - centroid).T)[None])[0]
+  plane = pts[steep][inliers]
+  centroid = plane.mean(axis=0)
+  normal = icp.least_axis(np.cov((plane - centroid).T)[None])[0]
   normal *= 1.0 if normal[2] >= 0 else -1.0
   height = float(-normal @ centroid)
-  # Counted over every point: the searched share is only what finds the plane.
-  whole = points - centre
-  count = int(np.sum(np.abs(whole @ normal + height) < PLANE_DISTANCE))
+  # Each searched point stands for `len(points) / len(pts)` of the scan's.
+  refit = on(normal[:, None].astype(np.float32), np.float32(height))[:, 0]
+  count = int(round(refit.sum() * len(points) / len(pts)))
   if (count < max(MIN_GROUND_POINTS, MIN_GROUND_SHARE * len(points)) or height < floor
       or normal[2] < cos_max):
     return None
@@ -164,23 +173,22 @@ def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
 
 
 def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
-          min_tilt_deg: float = 0.0, sensor_at_origin: bool = True,
-          surface: icp.Surface | None = None) -> Leveling:
-  """The `Leveling` of a scan (points [N, 3] metres; `sensor_at_origin`, `surface` as for
-  `ground`, a cloud without a ground below its origin searched again without that rule):
+          min_tilt_deg: float = 0.0, sensor_at_origin: bool = True) -> Leveling:
+  """The `Leveling` of a scan (points [N, 3] metres; `sensor_at_origin` as for `ground`, a
+  cloud without a ground below its origin searched again without that rule):
   the turn about `center` (default the origin) that makes its ground horizontal; no turn
   where the ground is tilted by less than `min_tilt_deg`, or where none is found (then
   `note` says so). A scan of fewer than MIN_POINTS_TO_LEVEL points is used as it is
   (`sparse` set, no note)."""
   if len(points) < MIN_POINTS_TO_LEVEL:
     return dataclasses.replace(unchanged(center), sparse=True)
-  found = ground(points, sensor_at_origin, seed, surface)
+  found = ground(points, sensor_at_origin, seed)
   if found is None and sensor_at_origin:
     # Perhaps no scan around its sensor (a map tile, a submap centred on its points): its
     # ground need not lie below the origin, but such a cloud is in a near-level world
     # frame, so its ground must be within OFF_SENSOR_MAX_TILT_DEG of z (a pitched scan of
     # walls has steep planes to mistake for one).
-    found = ground(points, False, seed, surface, OFF_SENSOR_MAX_TILT_DEG)
+    found = ground(points, False, seed, OFF_SENSOR_MAX_TILT_DEG)
   if found is None:
     return unchanged(center, 'no ground plane found to level it by (a plane below the '
                      f'sensor within {MAX_TILT_DEG:g} degrees of its z axis, holding '

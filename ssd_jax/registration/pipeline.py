@@ -510,8 +510,9 @@ class Options:
   seed        RANSAC's (and random keypoints') seed.
   level       LEVELS: 'ground' (each scan whose ground is tilted by LEVEL_MIN_TILT_DEG or
               more is first turned level about its sensor, `leveling`, and every pose
-              comes back in the scans' own frames; a pair with a scan of no ground is
-              registered with FPFH and RANSAC over any rotation, and a note says so) or
+              comes back in the scans' own frames; a pair with a scan of no ground keeps
+              its pose as given where verified clear, else is registered with FPFH and
+              RANSAC over any rotation, and notes say which) or
               'none' (the clouds as given: z is taken to be up). `register_many` levels
               each cloud once.
   """
@@ -607,26 +608,42 @@ def _finish(reg: Registration, cloud1, cloud2, options: Options, origin=None,
 LEVEL_MIN_TILT_DEG = 3.0
 
 
-def _leveling(clouds, offset, options: Options, names, surfaces=None):
+def _leveling(clouds, offset, options: Options, names):
   """Each cloud's `leveling.Leveling` (in its centred coordinates) where `options.level`
-  asks for it, and the one-line notes of what was done. `surfaces`: each cloud's
-  `icp.Surface`, whose normals the ground search then shares."""
+  asks for it, and the one-line notes of what was done."""
   if options.level == 'none':
     return [leveling.unchanged() for _ in clouds], []
-  surfaces = [None] * len(clouds) if surfaces is None else surfaces
   level = [leveling.level(c - offset, min_tilt_deg=LEVEL_MIN_TILT_DEG,
-                          sensor_at_origin=not offset.any(), surface=surface)
-           for c, surface in zip(clouds, surfaces)]
+                          sensor_at_origin=not offset.any()) for c in clouds]
   notes = []
   for name, lv in zip(names, level):
     if lv.sparse:
       notes.append(f'{name}: too few points to find its ground '
                    f'(< {leveling.MIN_POINTS_TO_LEVEL:,}); used as it is')
     elif lv.note:
-      notes.append(f'{name}: {lv.note}; registered with FPFH and RANSAC over any rotation')
+      notes.append(f'{name}: {lv.note}')
     elif lv.turned:
       notes.append(f'{name}: levelled, its ground {lv.tilt_deg:.1f} degrees off horizontal')
   return level, notes
+
+
+# A pair with a scan of no ground (`Leveling.note`) is registered as given first, where its
+# poses are verified: most such scans are upright (a sparse re-scan whose ground holds too
+# few points, an indoor scan of walls), and a pose verified as `_settled` is as sure as any
+# other pair's. Otherwise nothing may assume z is up: FPFH and RANSAC over any rotation.
+UPRIGHT_NOTE = 'registered as given (z up): its verified pose is clear'
+ANY_ROTATION_NOTE = 'registered with FPFH and RANSAC over any rotation'
+
+
+def _settled(reg: Registration) -> bool:
+  """Whether a verified registration's best pose is clear (`clearly_confident`)."""
+  return reg.verified_fitness is not None and verification.clearly_confident(
+      reg.verified_poses, reg.verified_fitness)
+
+
+def _any_rotation(options: Options) -> Options:
+  """The options of the rotation-invariant path (clouds levelled, or left, already)."""
+  return dataclasses.replace(options, descriptor='fpfh', estimator='rigid', level='none')
 
 
 def _unlevel(reg: Registration, level) -> Registration:
@@ -662,8 +679,16 @@ def register(*, target: np.ndarray, source: np.ndarray, model=None,
   stage = (lambda name: None) if progress is None else progress
   names = ('cloud 1', 'cloud 2')
   level, notes = _leveling(clouds, offset, options, names)
-  if any(lv.note for lv in level):   # no ground to level by: nothing may assume z is up
-    options = dataclasses.replace(options, descriptor='fpfh', estimator='rigid')
+  groundless = any(lv.note for lv in level)
+
+  def any_rotation():
+    reg, f1, f2 = register(target=target, source=source, model=model,
+                           options=_any_rotation(options), progress=progress)
+    reg.notes = notes + [ANY_ROTATION_NOTE] + reg.notes
+    return reg, f1, f2
+
+  if groundless and not options.verify:
+    return any_rotation()
   local, grids = [], []
   for c, lv, name in zip(clouds, level, names):
     stage(f'{name}: grid')
@@ -688,6 +713,10 @@ def register(*, target: np.ndarray, source: np.ndarray, model=None,
   cloud1, cloud2 = (prepared.PreparedCloud(c) for c in local)
   reg, f1, f2, _, fallback = _register_levels(
       levels, lambda: [levels_of(n, 'auto') for n in range(2)], cloud1, cloud2, options, stage)
+  if groundless:
+    if not _settled(reg):
+      return any_rotation()
+    notes.append(UPRIGHT_NOTE)
   reg.notes = notes + ([fallback] if fallback else [])
   if any(lv.turned for lv in level):
     # Back in the clouds' own (centred) frames: T = L1^-1 T' L2, the clouds turned back.
@@ -770,9 +799,7 @@ class Registrar:
     name = os.path.basename(path)
     offset = local_origin(points)
     own = prepared.PreparedCloud(points)
-    # The ground search's normals are the verification's when the cloud is not turned.
-    (level,), notes = _leveling([points], offset, self._options, [name],
-                                [own.target] if self._options.level != 'none' else None)
+    (level,), notes = _leveling([points], offset, self._options, [name])
     level = dataclasses.replace(level, center=offset)   # found about the centred points
     for line in notes:
       self._say(line)
@@ -803,14 +830,25 @@ class Registrar:
         for stage, s in entry.seconds.items():
           seconds[stage] += s
       entries.append(entry)
-    if any(e.level.note for e in entries):
-      # No ground to level one of them by: the pair as `register` takes it (FPFH, RANSAC
-      # over any rotation), from the clouds kept on the grid.
+    groundless = any(e.level.note for e in entries)
+
+    def any_rotation(tried: dict):
+      # From the clouds kept on the grid; `tried`: the seconds of the upright try before.
       reg, f1, f2 = register(target=entries[0].own.points, source=entries[1].own.points,
-                             model=self._model, options=dataclasses.replace(self._options,
-                                                                             voxel=0.0))
-      reg.seconds = {**seconds, **reg.seconds}
+                             model=self._model,
+                             options=dataclasses.replace(_any_rotation(self._options),
+                                                         voxel=0.0))
+      spent = collections.Counter(seconds)
+      spent.update(tried)
+      spent.update(reg.seconds)
+      for f in (f1, f2):
+        spent.update({k: f.seconds[k] for k in ('keypoints', 'descriptors')})
+      reg.seconds = dict(spent)
+      reg.notes = [ANY_ROTATION_NOTE] + reg.notes
       return reg, f1, f2
+
+    if groundless and not self._options.verify:
+      return any_rotation({})
     levels = [e.features for e in entries]
     lazy = ('keypoints', 'descriptors')   # what the clouds' levels have cost until now
     before = {stage: sum(f.seconds[stage] for f in levels) for stage in lazy}
@@ -822,6 +860,10 @@ class Registrar:
       levels = levels + list(used)
     for stage in lazy:
       seconds[stage] = sum(f.seconds[stage] for f in levels) - before[stage]
+    if groundless:
+      if not _settled(reg):
+        return any_rotation(reg.seconds)
+      reg.notes.append(UPRIGHT_NOTE)
     level = [e.level for e in entries]
     if any(lv.turned for lv in level):   # back in the files' frames; the kept features stay
       reg = _unlevel(reg, level)
