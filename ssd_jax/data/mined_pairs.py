@@ -106,7 +106,7 @@ def chained(pairs: Sequence[MinedPair], max_links: int) -> list[MinedPair]:
   for p in pairs:
     onward.setdefault(p.cloud1, []).append(p)
   frontier = list(pairs)
-  for links in range(2, max_links + 1):
+  for _ in range(2, max_links + 1):
     grown = []
     for p in frontier:
       for q in onward.get(p.cloud2, ()):
