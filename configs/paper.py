@@ -57,6 +57,11 @@ def get_config() -> ml_collections.ConfigDict:
   model.independent_centers = False  # sample the two branches independently
   model.alpha = 1.0              # CF weight temperature (paper)
   model.loss = 'frobenius'       # frobenius (paper) | squared_frobenius (reference code)
+  # > 0: add this times an InfoNCE at corresponding cluster centres (within
+  # contrastive_radius metres once PC2 is turned back; objective.correspondence_nce).
+  model.contrastive_weight = 0.0
+  model.contrastive_radius = 1.0
+  model.contrastive_temperature = 0.1
   model.self_rotation = 'gaussian'  # gaussian (paper) | uniform (the whole circle)
   model.rotation_sigma = 0.6     # radians
   model.rotation_clip = 1.8        # radians; the reference code clips phi here

@@ -93,6 +93,11 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
     require(isinstance(d.pairs_links, int) and d.pairs_links >= 1,
             f'data.pairs_links must be a whole number >= 1, got {d.pairs_links!r}')
   require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
+  require(m.contrastive_weight >= 0,
+          f'model.contrastive_weight must be >= 0, got {m.contrastive_weight}')
+  require(m.contrastive_radius > 0 and m.contrastive_temperature > 0,
+          'model.contrastive_radius and contrastive_temperature must be > 0, got '
+          f'{m.contrastive_radius} and {m.contrastive_temperature}')
   require(d.num_points >= m.num_clusters,
           f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '
           'every cluster center is one of the input points')

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import flax.linen as nn
@@ -58,6 +59,25 @@ def _branch_clusters(keys, pc1, valid1, pc2, valid2, cfg):
   return centers, clusters, has_nb & jnp.concatenate([cvalid1, cvalid2], 0)
 
 
+def correspondence_nce(centers1: jax.Array, centers2: jax.Array, desc1: jax.Array,
+                       desc2: jax.Array, mask1: jax.Array, mask2: jax.Array,
+                       radius: float, temperature: float) -> jax.Array:
+  """InfoNCE at corresponding cluster centres of one pair of branches, both in PC1's
+  frame: centers [k, 3] metres, unit descriptors [k, D], masks [k]. Each centre of PC1
+  with a centre of PC2 within `radius` scores its descriptor against all of PC2's
+  (similarity / temperature, a softmax): the loss is minus the log of the share on its
+  partners. -> scalar (0 where no centre has a partner)."""
+  near = jnp.sum((centers1[:, None] - centers2[None]) ** 2, -1) < radius ** 2
+  partner = near & mask1[:, None] & mask2[None]
+  # A large finite "minus infinity": a row with no partner stays finite, and so do the
+  # gradients `where` passes through it.
+  logits = jnp.where(mask2[None], desc1 @ desc2.T / temperature, -1e9)
+  log_share = (jax.nn.logsumexp(jnp.where(partner, logits, -1e9), axis=1)
+               - jax.nn.logsumexp(logits, axis=1))
+  has = partner.any(1)
+  return -jnp.sum(jnp.where(has, log_share, 0.0)) / jnp.maximum(has.sum(), 1)
+
+
 def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,
                          points: jax.Array, valid: jax.Array,
                          cfg: ml_collections.ConfigDict, train: bool = True):
@@ -85,6 +105,13 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
       xp, xq, fp, fq, cfg.alpha, mp, mq, ap, aq))(
           centers[:b], centers[b:], desc[:b], desc[b:], mask[:b], mask[b:], att[:b], att[b:])
   per_pair = rotation_loss(r_est, r_gt, cfg.loss)
+  if cfg.contrastive_weight > 0:
+    # PC2's centres back in PC1's frame (PC2 = its view turned by R_gt: rows p R_gt^T).
+    back = jnp.einsum('bkj,bji->bki', centers[b:], r_gt)
+    nce = jax.vmap(functools.partial(correspondence_nce, radius=cfg.contrastive_radius,
+                                     temperature=cfg.contrastive_temperature))(
+        centers[:b], back, desc[:b], desc[b:], mask[:b], mask[b:])
+    per_pair = per_pair + cfg.contrastive_weight * nce
   metrics = {'loss': jnp.mean(per_pair),
              'rotation_error_deg': jnp.mean(geometry.geodesic_angle_deg(r_gt, r_est)),
              'rotation_deg': jnp.mean(geometry.geodesic_angle_deg(r_gt, jnp.eye(3)))}

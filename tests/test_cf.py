@@ -123,3 +123,22 @@ def test_rotation_loss_values_and_gradient_at_identity():
   assert np.isfinite(float(g))
   with pytest.raises(ValueError, match='rotation loss must be one of'):
     objective.rotation_loss(r, r, 'l1')
+
+
+def test_correspondence_nce_rewards_partners_alike_and_stays_finite_without_them():
+  rng = np.random.default_rng(0)
+  centers = jnp.asarray(rng.uniform(-20, 20, (64, 3)), jnp.float32)
+  desc = rng.normal(size=(64, 16))
+  desc = jnp.asarray(desc / np.linalg.norm(desc, axis=1, keepdims=True), jnp.float32)
+  mask = jnp.ones(64, bool)
+  nce = lambda c2, d2, m2=mask: objective.correspondence_nce(centers, c2, desc, d2, mask, m2,
+                                                             1.0, 0.1)
+  alike = float(nce(centers, desc))
+  shuffled = float(nce(centers, desc[::-1]))
+  assert alike < 0.1 < 2.0 < shuffled                  # log 64 = 4.2 for a blind guess
+  # No centre of PC2 within the radius (or none valid): 0, and finite gradients.
+  far = centers + 100.0
+  assert float(nce(far, desc)) == 0.0
+  for c2, m2 in ((far, mask), (centers, jnp.zeros(64, bool))):
+    grad = jax.grad(lambda d: nce(c2, d, m2))(desc)
+    assert np.isfinite(np.asarray(grad)).all()

@@ -30,7 +30,9 @@ def test_config_errors_name_the_value(tiny_config):
            ('model.branch_fov', (90.0, 400.0), 'branch_fov must be within 360'),
            ('inference.voxel_size', -0.2, 'inference.voxel_size must be >= 0 metres'),
            ('train.init_scope', 'detector', "init_scope must be 'descriptor' or 'model'"),
-           ('train.lr_schedule', 'step', "lr_schedule must be one of .*'step'")]
+           ('train.lr_schedule', 'step', "lr_schedule must be one of .*'step'"),
+           ('model.contrastive_weight', -1.0, 'contrastive_weight must be >= 0, got -1.0'),
+           ('model.contrastive_temperature', 0.0, 'contrastive_temperature must be > 0')]
   for field, value, message in cases:
     config = tiny_config.copy_and_resolve_references()
     section, name = field.split('.')
