@@ -81,7 +81,8 @@ def correspondence_nce(centers1: jax.Array, centers2: jax.Array, desc1: jax.Arra
 def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.Array,
                          points: jax.Array, valid: jax.Array,
                          cfg: ml_collections.ConfigDict, train: bool = True):
-  """The paper's loss (Eq. 6) of a batch of unlabeled clouds, ||I - R R_gt^T||_F.
+  """The paper's loss (Eq. 6) of a batch of unlabeled clouds, ||I - R R_gt^T||_F (plus
+  `contrastive_weight` times `correspondence_nce` where that is > 0; the paper's: 0).
 
   model: a `FeatureNet` with variables {'params', 'batch_stats'}; key: the step's PRNG
   key; points [B, N, 3] metres, valid [B, N] (or a second view each: see
