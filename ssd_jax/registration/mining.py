@@ -74,9 +74,8 @@ def candidate_pairs(num_scans: int, gaps: Sequence[int] = DEFAULT_GAPS
 
 def cycle_error(t_ab: np.ndarray, t_bc: np.ndarray, t_ac: np.ndarray) -> tuple[float, float]:
   """How far T_ab T_bc is from T_ac: (rotation degrees, translation metres)."""
-  d = geometry.invert_transform(t_ac) @ t_ab @ t_bc
-  cos = np.clip((np.trace(d[:3, :3]) - 1) / 2, -1.0, 1.0)
-  return float(np.degrees(np.arccos(cos))), float(np.linalg.norm(d[:3, 3]))
+  e = metrics.registration_errors(t_ac, t_ab @ t_bc)
+  return e['rre_geodesic'], e['rte']
 
 
 def apply_gate(pairs: list[MinedPair], index: dict[str, int]) -> list[MinedPair]:
