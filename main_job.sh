@@ -10,6 +10,6 @@ py=.venv/bin/python
 $py -m experiments.make_synthetic --config=configs/data/synthetic_small.py --out=data_cache/synthetic_small
 # The shipped recipe of `ours` for 400 steps (~2 minutes).
 $py -m experiments.train --config=configs/ours.py --workdir=runs/main_job --config.train.num_steps=400
-# Tables I-III and Figs. 3-6 on 12 pairs of each held-out set: runs/reproduce_small/report.md.
+# Tables I-III and Figs. 3-6 on 8 pairs of each held-out set: runs/reproduce_small/report.md.
 $py -m experiments.evaluate --config=configs/reproduce_small.py \
     --config.data_root=data_cache/synthetic_small --workdir=runs/reproduce_small

@@ -62,6 +62,10 @@ def get_config() -> ml_collections.ConfigDict:
   model.contrastive_weight = 0.0
   model.contrastive_radius = 1.0
   model.contrastive_temperature = 0.1
+  # PC2's cluster centres its points nearest PC1's (turned by R_gt) instead of a sampling
+  # of their own, so every centre where the views overlap has its partner (the InfoNCE's
+  # positives); off: each branch samples its own (the paper).
+  model.partner_centers = False
   model.self_rotation = 'gaussian'  # gaussian (paper) | uniform (the whole circle)
   model.rotation_sigma = 0.6     # radians
   model.rotation_clip = 1.8        # radians; the reference code clips phi here

@@ -29,9 +29,10 @@ flags.DEFINE_string('out', 'data_cache/cross_sensor', 'Output directory.')
 flags.DEFINE_string('real', os.environ.get('SSD_JAX_SHARED_DATA', '../shared/data'),
                     'Real data root (example/ and kitti_object_velodyne/).')
 flags.DEFINE_bool('overwrite', False, 'Replace sets made with a different config.')
-flags.DEFINE_string('scans_of', None, 'Instead of the test sets: write unlabeled scans of '
-                    'this unit (ssd_jax/sensors.py) along drives through scenes of their own '
-                    'to OUT, e.g. to adapt a model to it (experiments.adapt).')
+flags.DEFINE_list('scans_of', None, 'Instead of the test sets: write unlabeled scans of '
+                  'this unit (ssd_jax/sensors.py) along drives through scenes of their own '
+                  'to OUT, e.g. to adapt a model to it (experiments.adapt); several units, '
+                  'comma-separated, take turns along each drive (a mixed-sensor drive).')
 flags.DEFINE_integer('num_scenes', 3, 'With --scans_of: scenes driven through (a scan every '
                      '6 m, ~65 per scene).')
 flags.DEFINE_string('poses', None, 'With --scans_of: also write the scans\' ground-truth '
@@ -66,11 +67,13 @@ def main(argv):
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   config, out = FLAGS.config, Path(FLAGS.out)
   if FLAGS.scans_of:
-    sensors.get(FLAGS.scans_of)
-    with tqdm.tqdm(desc=f'{FLAGS.scans_of} scans', unit='scan') as bar:
+    for name in FLAGS.scans_of:
+      sensors.get(name)
+    units = '/'.join(FLAGS.scans_of)
+    with tqdm.tqdm(desc=f'{units} scans', unit='scan') as bar:
       n = cross_sensor.write_sensor_scans(config, FLAGS.scans_of, out, FLAGS.num_scenes,
                                           progress=bar.update, poses_out=FLAGS.poses)
-    print(f'wrote {out}: {n} unlabeled {FLAGS.scans_of} scans')
+    print(f'wrote {out}: {n} unlabeled {units} scans')
     return
   cross_sensor.check_config(config)
   with tqdm.tqdm(total=cross_sensor.count_pairs(config), desc='synthetic pairs',

@@ -98,6 +98,8 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
   require(m.contrastive_radius > 0 and m.contrastive_temperature > 0,
           'model.contrastive_radius and contrastive_temperature must be > 0, got '
           f'{m.contrastive_radius} and {m.contrastive_temperature}')
+  require(isinstance(m.partner_centers, bool),
+          f'model.partner_centers must be True or False, got {m.partner_centers!r}')
   require(d.num_points >= m.num_clusters,
           f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '
           'every cluster center is one of the input points')

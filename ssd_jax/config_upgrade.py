@@ -25,6 +25,7 @@ RUN_KEYS = {
     ('model', 'contrastive_weight'): 0.0,
     ('model', 'contrastive_radius'): 1.0,
     ('model', 'contrastive_temperature'): 0.1,
+    ('model', 'partner_centers'): False,
     ('model', 'branch_dropout'): 0.0,
     ('model', 'branch_crop_shift'): 0.0,
     ('model', 'branch_crop_radius'): 20.0,

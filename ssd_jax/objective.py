@@ -45,13 +45,29 @@ def _apply(model, variables, clusters, train):
   return model.apply(variables, clusters, train=False), variables['batch_stats']
 
 
-def _branch_clusters(keys, pc1, valid1, pc2, valid2, cfg):
-  """Cluster centres of both branches (`cfg.center_sampling`) and their ball-query
-  clusters, PC1's batch first: -> (centers [2B, k, 3], clusters [2B, k, c, 3], mask [2B, k])."""
+def partner_indices(centers1: jax.Array, pc2: jax.Array, valid2: jax.Array,
+                    r_gt: jax.Array) -> jax.Array:
+  """For each of PC1's centres, PC2's valid point nearest to it once turned by R_gt (PC2
+  is its view turned: rows p R_gt^T). centers1 [B, k, 3], pc2 [B, N, 3] metres, valid2
+  [B, N], r_gt [B, 3, 3] -> [B, k] int32 indices into pc2."""
+  target = jnp.einsum('bki,bji->bkj', centers1, r_gt)
+  d2 = jax.vmap(grouping.squared_distances)(target, pc2)
+  return jnp.argmin(jnp.where(valid2[:, None, :], d2, jnp.inf), axis=-1).astype(jnp.int32)
+
+
+def _branch_clusters(keys, pc1, valid1, pc2, valid2, cfg, r_gt):
+  """Cluster centres of both branches (`cfg.center_sampling`; PC2's the partners of PC1's
+  with `cfg.partner_centers`) and their ball-query clusters, PC1's batch first:
+  -> (centers [2B, k, 3], clusters [2B, k, c, 3], mask [2B, k])."""
   idx1, cvalid1 = grouping.sample_centers(keys[0], pc1, valid1, cfg.num_clusters,
                                           cfg.center_sampling)
-  idx2, cvalid2 = grouping.sample_centers(keys[1], pc2, valid2, cfg.num_clusters,
-                                          cfg.center_sampling)
+  if cfg.partner_centers:
+    centers1 = jnp.take_along_axis(pc1, idx1[..., None], axis=1)
+    idx2 = partner_indices(centers1, pc2, valid2, r_gt)
+    cvalid2 = jnp.take_along_axis(valid2, idx2, axis=1)
+  else:
+    idx2, cvalid2 = grouping.sample_centers(keys[1], pc2, valid2, cfg.num_clusters,
+                                            cfg.center_sampling)
   both = jnp.concatenate([pc1, pc2], 0)
   centers = jnp.take_along_axis(both, jnp.concatenate([idx1, idx2], 0)[..., None], axis=1)
   clusters, has_nb = grouping.extract_clusters(
@@ -95,7 +111,7 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
   # One key for both branches (the reference's): FPS starts at the same point, and PC2
   # being PC1 turned, in the same order, picks almost the same centres.
   keys = (k_c1, k_c2) if cfg.independent_centers else (k_c1, k_c1)
-  centers, clusters, mask = _branch_clusters(keys, pc1, valid1, pc2, valid2, cfg)
+  centers, clusters, mask = _branch_clusters(keys, pc1, valid1, pc2, valid2, cfg, r_gt)
   # Both branches in one call: shared weights, BatchNorm statistics over both.
   (desc, attention, _), new_batch_stats = _apply(model, variables, clusters, train)
   # The self-supervised detector (an extension) weighs pair ij by w_ij * a_i * b_j, so

@@ -33,6 +33,7 @@ SHIPPED = {
     'ours': 'self-supervised descriptor (configs/ours.py)',
     'ours_detector': 'self-supervised descriptor and detector (configs/ours_detector.py)',
     'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/feat3dnet.py)',
+    'ours_rescan': 'ours fine-tuned to match across sensors and standpoints (configs/ours_rescan.py)',
 }
 CONFIG_FILE, WEIGHTS_FILE, CARD_FILE = 'config.json', 'weights.msgpack', 'MODEL_CARD.md'
 

@@ -142,3 +142,24 @@ def test_correspondence_nce_rewards_partners_alike_and_stays_finite_without_them
   for c2, m2 in ((far, mask), (centers, jnp.zeros(64, bool))):
     grad = jax.grad(lambda d: nce(c2, d, m2))(desc)
     assert np.isfinite(np.asarray(grad)).all()
+
+
+def test_partner_centres_are_pc2s_points_nearest_pc1s_turned_centres():
+  rng = np.random.default_rng(1)
+  view = rng.uniform(-10, 10, (1, 200, 3)).astype(np.float32)
+  phi = 1.1
+  r_gt = np.array([[[np.cos(phi), -np.sin(phi), 0], [np.sin(phi), np.cos(phi), 0], [0, 0, 1]]],
+                  np.float32)
+  pc2 = view @ r_gt[0].T                        # PC2 is the view turned: rows p R_gt^T
+  order = rng.permutation(200)                  # in its own point order
+  pc2 = pc2[:, order]
+  valid2 = np.ones((1, 200), bool)
+  centres = view[:, :8]
+  idx = np.asarray(objective.partner_indices(jnp.asarray(centres), jnp.asarray(pc2),
+                                             jnp.asarray(valid2), jnp.asarray(r_gt)))
+  np.testing.assert_array_equal(order[idx[0]], np.arange(8))
+  # An invalid point is never a partner, even the one that would be exact.
+  valid2[0, idx[0, 0]] = False
+  idx = np.asarray(objective.partner_indices(jnp.asarray(centres), jnp.asarray(pc2),
+                                             jnp.asarray(valid2), jnp.asarray(r_gt)))
+  assert valid2[0, idx[0]].all() and order[idx[0, 0]] != 0

@@ -5,6 +5,7 @@ import importlib.util
 import json
 from pathlib import Path
 
+import ml_collections
 import pytest
 
 from ssd_jax import cli, config_checks, config_upgrade
@@ -40,6 +41,15 @@ def test_config_errors_name_the_value(tiny_config):
     with pytest.raises(config_checks.ConfigError, match=message):
       config_checks.check_config(config)
 
+
+
+def test_a_stored_config_with_a_flag_that_is_not_a_bool_is_refused(tiny_config):
+  # A config read from JSON is typed by its values: a string where True/False belongs.
+  raw = tiny_config.to_dict()
+  raw['model']['partner_centers'] = 'yes'
+  with pytest.raises(config_checks.ConfigError,
+                     match="model.partner_centers must be True or False, got 'yes'"):
+    config_checks.check_config(ml_collections.ConfigDict(raw))
 
 def _each_data_value_fails(config, cases):
   """Each (data field, value, message) of `cases`, set alone on `config`, is refused."""

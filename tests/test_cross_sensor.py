@@ -133,6 +133,17 @@ def test_unlabeled_scans_of_one_unit(tmp_path):
   assert near.mean() > 0.8 and np.abs(el).max() < 16   # a VLP-16's rings, nothing above
 
 
+def test_a_mixed_drive_takes_its_units_in_turn(tmp_path):
+  n = cross_sensor.write_sensor_scans(tiny_cross_sensor_config(), ['vlp16', 'front120'],
+                                      tmp_path, num_scenes=1, spacing=20.0)
+  files = sorted(tmp_path.glob('*.bin'))
+  assert n == len(files) >= 3
+  azimuth = [np.degrees(np.abs(np.arctan2(p[:, 1], p[:, 0]))).max()
+             for p in map(io.read_cloud, files)]
+  # Even scans the spinning VLP-16 (all round), odd ones the 120-degree unit (+-60 deg).
+  assert all(a > 170 for a in azimuth[0::2]) and all(a < 62 for a in azimuth[1::2])
+
+
 @pytest.mark.multiprocess
 def test_make_real_pairs_names_a_bad_unit(tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.make_real_pairs', '--sensor=vlp32',

@@ -20,7 +20,7 @@ import json
 import os
 from pathlib import Path
 import shutil
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -174,12 +174,13 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
 SCANS_SPLIT = 6   # scenes of `write_sensor_scans`: neither a training nor a test split's
 
 
-def write_sensor_scans(config, sensor: str, out: str | os.PathLike, num_scenes: int = 3,
-                       spacing: float = 6.0,
+def write_sensor_scans(config, sensor: str | Sequence[str], out: str | os.PathLike,
+                       num_scenes: int = 3, spacing: float = 6.0,
                        progress: Callable[[int], None] | None = None,
                        poses_out: str | os.PathLike | None = None) -> int:
-  """Unlabeled scans of one unit (`ssd_jax.sensors`) along drives through `num_scenes`
-  scenes of their own (split 6), a scan every `spacing` metres, in capture order:
+  """Unlabeled scans of one unit (`ssd_jax.sensors`), or of several in turn (scan k of a
+  drive by unit k mod their number: a mixed-sensor drive), along drives through
+  `num_scenes` scenes of their own (split 6), a scan every `spacing` metres, in capture order:
   OUT/<scene>_<k>.bin (xyz + normals, 0.2 m voxel grid, the sensor's frame) and no poses,
   as a user's folder of scans would be. `poses_out`: a file outside OUT to write their
   ground-truth poses T_world_sensor to (KITTI's layout, one row-major 3 x 4 per scan in
@@ -187,7 +188,8 @@ def write_sensor_scans(config, sensor: str, out: str | os.PathLike, num_scenes: 
   that no pose relates two scenes), for measuring what is mined from them
   (`registration.mining.label_errors`). -> the number of scans."""
   dataset.check_config(config)
-  model = _sensor_model(config, sensor)
+  units = [sensor] if isinstance(sensor, str) else list(sensor)
+  models = [_sensor_model(config, name) for name in units]
   out = Path(out)
   out.mkdir(parents=True, exist_ok=True)
   count, all_poses = 0, []
@@ -201,10 +203,11 @@ def write_sensor_scans(config, sensor: str, out: str | os.PathLike, num_scenes: 
     apart[:, 0, 3] += SCENE_APART * scene_idx
     all_poses.append(apart)
     raycaster = lidar.Raycaster(scene)
-    calibration = model.calibration(np.random.default_rng((*seed, 0)))
+    calibrations = [m.calibration(np.random.default_rng((*seed, 0))) for m in models]
     for k, pose in enumerate(poses):
-      raw, _ = lidar.scan(raycaster, pose, model, np.random.default_rng((*seed, 1 + k)),
-                          calibration)
+      unit = k % len(models)
+      raw, _ = lidar.scan(raycaster, pose, models[unit], np.random.default_rng((*seed, 1 + k)),
+                          calibrations[unit])
       io.write_bin(out / f'{scene_idx:02d}_{k:04d}.bin', *dataset.process(config, raw))
       count += 1
       if progress is not None:
