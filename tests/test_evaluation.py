@@ -189,6 +189,7 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
     assert heading in report, heading
   assert 'Ours: `' in report and '(step 4)' in report
   assert f'3DFeat-Net: `{tmp_path / "none"}` **missing**' in report
+  assert 'Ours (re-scan views): `ours_rescan` not loaded: no row uses it' in report
   assert '3DFeat-Net keypoints' in report and 'no such checkpoint directory' in report
   # the paper's four keypoint x descriptor rows say which detector each uses
   assert "- 3DFeat-Net kpt: 3DFeat-Net's attention, trained by its" in report

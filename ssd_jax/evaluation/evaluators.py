@@ -327,9 +327,13 @@ def _report(config, ctx: Context, sections: Sequence[Section], skipped: Sequence
            'numbers are shown beside for comparison.', '', '## Checkpoints', '']
   for name, path in sorted(config.checkpoints.items()):
     model = ctx.store.models.get(name)
-    lines.append(f'- {feature_store.NAMES.get(name, name)}: `{path}` ' +
-                 (f'(step {model.step})' if model is not None else
-                  f'**missing**: {ctx.missing.get(name, "not used by any row")}'))
+    if model is not None:
+      state = f'(step {model.step})'
+    elif name in ctx.missing:
+      state = f'**missing**: {ctx.missing[name]}'
+    else:
+      state = 'not loaded: no row uses it'
+    lines.append(f'- {feature_store.NAMES.get(name, name)}: `{path}` {state}')
   detectors = sorted(set(keypoint_sources) & set(feature_store.DETECTORS))
   if detectors:
     lines += ['', 'Keypoint rows named after a checkpoint use its detector:', '']
