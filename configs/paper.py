@@ -66,6 +66,10 @@ def get_config() -> ml_collections.ConfigDict:
   # of their own, so every centre where the views overlap has its partner (the InfoNCE's
   # positives); off: each branch samples its own (the paper).
   model.partner_centers = False
+  # > 0: each partner is PC2's point nearest a random point within this many metres
+  # (horizontally) of PC1's turned centre, as far as registration's keypoints of two
+  # clouds lie from each other (objective.partner_indices).
+  model.partner_jitter = 0.0
   model.self_rotation = 'gaussian'  # gaussian (paper) | uniform (the whole circle)
   model.rotation_sigma = 0.6     # radians
   model.rotation_clip = 1.8        # radians; the reference code clips phi here

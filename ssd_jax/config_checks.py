@@ -100,6 +100,10 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'{m.contrastive_radius} and {m.contrastive_temperature}')
   require(isinstance(m.partner_centers, bool),
           f'model.partner_centers must be True or False, got {m.partner_centers!r}')
+  require(isinstance(m.partner_jitter, (int, float)) and m.partner_jitter >= 0,
+          f'model.partner_jitter must be a distance >= 0 (metres), got {m.partner_jitter!r}')
+  require(m.partner_jitter == 0 or m.partner_centers,
+          'model.partner_jitter moves partner centres: it needs model.partner_centers')
   require(d.num_points >= m.num_clusters,
           f'data.num_points ({d.num_points}) must be >= model.num_clusters ({m.num_clusters}): '
           'every cluster center is one of the input points')

@@ -26,6 +26,7 @@ RUN_KEYS = {
     ('model', 'contrastive_radius'): 1.0,
     ('model', 'contrastive_temperature'): 0.1,
     ('model', 'partner_centers'): False,
+    ('model', 'partner_jitter'): 0.0,
     ('model', 'branch_dropout'): 0.0,
     ('model', 'branch_crop_shift'): 0.0,
     ('model', 'branch_crop_radius'): 20.0,

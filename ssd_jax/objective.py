@@ -46,11 +46,23 @@ def _apply(model, variables, clusters, train):
 
 
 def partner_indices(centers1: jax.Array, pc2: jax.Array, valid2: jax.Array,
-                    r_gt: jax.Array) -> jax.Array:
+                    r_gt: jax.Array, key: jax.Array | None = None,
+                    jitter: float = 0.0) -> jax.Array:
   """For each of PC1's centres, PC2's valid point nearest to it once turned by R_gt (PC2
-  is its view turned: rows p R_gt^T). centers1 [B, k, 3], pc2 [B, N, 3] metres, valid2
-  [B, N], r_gt [B, 3, 3] -> [B, k] int32 indices into pc2."""
+  is its view turned: rows p R_gt^T), or, with `jitter` > 0 metres, nearest to a point
+  drawn uniformly (`key`) from the horizontal disc of that radius around it.
+  centers1 [B, k, 3], pc2 [B, N, 3] metres, valid2 [B, N], r_gt [B, 3, 3] -> [B, k] int32
+  indices into pc2."""
   target = jnp.einsum('bki,bji->bkj', centers1, r_gt)
+  if jitter > 0:
+    # Registration's keypoints are sampled in each cloud on its own, so a keypoint's
+    # counterpart lies up to about half their spacing away: partners as far off train for
+    # that gap (configs/experiments/rescan_jitter.py measures it). Horizontal, as R_gt
+    # turns about z only.
+    k_r, k_a = jax.random.split(key)
+    r = jitter * jnp.sqrt(jax.random.uniform(k_r, target.shape[:2]))
+    a = jax.random.uniform(k_a, target.shape[:2], maxval=2 * jnp.pi)
+    target = target + jnp.stack([r * jnp.cos(a), r * jnp.sin(a), jnp.zeros_like(r)], -1)
   d2 = jax.vmap(grouping.squared_distances)(target, pc2)
   return jnp.argmin(jnp.where(valid2[:, None, :], d2, jnp.inf), axis=-1).astype(jnp.int32)
 
@@ -63,7 +75,7 @@ def _branch_clusters(keys, pc1, valid1, pc2, valid2, cfg, r_gt):
                                           cfg.center_sampling)
   if cfg.partner_centers:
     centers1 = jnp.take_along_axis(pc1, idx1[..., None], axis=1)
-    idx2 = partner_indices(centers1, pc2, valid2, r_gt)
+    idx2 = partner_indices(centers1, pc2, valid2, r_gt, keys[1], cfg.partner_jitter)
     cvalid2 = jnp.take_along_axis(valid2, idx2, axis=1)
   else:
     idx2, cvalid2 = grouping.sample_centers(keys[1], pc2, valid2, cfg.num_clusters,

@@ -163,3 +163,23 @@ def test_partner_centres_are_pc2s_points_nearest_pc1s_turned_centres():
   idx = np.asarray(objective.partner_indices(jnp.asarray(centres), jnp.asarray(pc2),
                                              jnp.asarray(valid2), jnp.asarray(r_gt)))
   assert valid2[0, idx[0]].all() and order[idx[0, 0]] != 0
+
+
+def test_jittered_partners_lie_within_the_jitter_of_the_exact_ones_and_are_seeded():
+  rng = np.random.default_rng(2)
+  # A dense, flat grid at 0.1 m: a partner's distance from its centre is the jitter's draw.
+  g = np.stack(np.meshgrid(np.arange(-10, 10, 0.1), np.arange(-10, 10, 0.1)), -1).reshape(-1, 2)
+  pc2 = jnp.asarray(np.concatenate([g, np.zeros((len(g), 1))], 1)[None], jnp.float32)
+  valid2 = jnp.ones(pc2.shape[:2], bool)
+  centres = jnp.asarray(np.concatenate([rng.uniform(-5, 5, (1, 256, 2)), np.zeros((1, 256, 1))],
+                                       -1), jnp.float32)
+  eye = jnp.eye(3)[None]
+  gap = lambda idx: np.linalg.norm(np.asarray(pc2[0, idx[0]] - centres[0]), axis=1)
+  jittered = lambda seed: objective.partner_indices(centres, pc2, valid2, eye,
+                                                    jax.random.key(seed), 1.5)
+  exact = gap(objective.partner_indices(centres, pc2, valid2, eye))
+  assert exact.max() < 0.08                                  # the grid's half diagonal
+  far = gap(jittered(0))
+  assert far.max() < 1.5 + 0.08 and np.median(far) > 0.8     # uniform in the disc: 1.06
+  np.testing.assert_array_equal(np.asarray(jittered(0)), np.asarray(jittered(0)))
+  assert (np.asarray(jittered(1)) != np.asarray(jittered(0))).mean() > 0.9

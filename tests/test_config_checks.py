@@ -33,7 +33,10 @@ def test_config_errors_name_the_value(tiny_config):
            ('train.init_scope', 'detector', "init_scope must be 'descriptor' or 'model'"),
            ('train.lr_schedule', 'step', "lr_schedule must be one of .*'step'"),
            ('model.contrastive_weight', -1.0, 'contrastive_weight must be >= 0, got -1.0'),
-           ('model.contrastive_temperature', 0.0, 'contrastive_temperature must be > 0')]
+           ('model.contrastive_temperature', 0.0, 'contrastive_temperature must be > 0'),
+           ('model.partner_jitter', -1.0, 'partner_jitter must be a distance >= 0'),
+           # tiny_config's partner_centers is off: a jitter would move nothing.
+           ('model.partner_jitter', 1.0, 'partner_jitter moves partner centres: it needs')]
   for field, value, message in cases:
     config = tiny_config.copy_and_resolve_references()
     section, name = field.split('.')
