@@ -35,6 +35,7 @@ def get_config() -> ml_collections.ConfigDict:
   config.max_pairs = 0            # 0 = all pairs of every set (the first max_pairs otherwise)
   config.seed = 0                 # RANSAC samples of pair n use seed * 1,000,003 + n
   config.fpfh_max_nn = 0          # neighbour cap of FPFH's 4 m searches (0: none, the paper's)
+  config.num_keypoints = 1024     # farthest-point keypoints per cloud of the 'auto' rows
   config.level = 'none'           # 'ground': level each tilted scan first (register --level)
   config.evals = ml_collections.ConfigDict()
   return config

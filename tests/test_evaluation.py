@@ -451,3 +451,18 @@ def test_feature_store_shares_work_between_rows_and_changes_no_result(tmp_path, 
     alone = registration.register_pairs([pair], [row], feature_store.FeatureStore(
         {'ours': model}), progress=False)[row][0]
     assert alone == shared[row][0] and alone['success']
+
+
+def test_feature_store_takes_as_many_farthest_point_keypoints_as_asked(tmp_path):
+  rng = np.random.default_rng(0)
+  cloud = rng.uniform(-30, 30, (5000, 3)).astype(np.float32)
+  cloud[:, 2] *= 0.1
+  path = tmp_path / 'cloud.npy'
+  np.save(path, cloud)
+  default = feature_store.FeatureStore({}).keypoints(path, 'auto')
+  fewer = feature_store.FeatureStore({}, num_keypoints=200).keypoints(path, 'auto')
+  assert len(default) == 1024 and len(fewer) == 200
+  # Farthest-point picks continue one sampling: the 200 are the first 200 of the 1,024.
+  assert set(fewer.tolist()) <= set(default.tolist())
+  with pytest.raises(errors.UserError, match='num_keypoints must be a whole number >= 3'):
+    feature_store.FeatureStore({}, num_keypoints=0)

@@ -285,8 +285,9 @@ def _evaluate(config: ml_collections.ConfigDict, workdir: Path, command: str,
   evals = ordered_evals(config)
   models, missing = feature_store.load_models(config.checkpoints,
                                               feature_store.model_names(rows_needed(config)))
-  store = feature_store.FeatureStore(models, config.seed, config.fpfh_max_nn,
-                                     config.get('level', 'none'))
+  # Configs written before an option existed get the store's default for it.
+  optional = {k: config[k] for k in ('level', 'num_keypoints') if k in config}
+  store = feature_store.FeatureStore(models, config.seed, config.fpfh_max_nn, **optional)
   workdir.mkdir(parents=True, exist_ok=True)
   ctx = Context(config, store, missing, workdir, Path(config.data_root or '.'))
   sections, skipped, seconds, ran = [], [], {}, []

@@ -22,6 +22,7 @@ from ssd_jax import errors, inference, pretrained
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
 from ssd_jax.registration import features as features_lib, leveling, pipeline
+from ssd_jax.registration import keypoints as keypoints_lib
 from ssd_jax.registration import prepared as prepared_lib
 
 BUILTIN_KEYPOINTS = ('iss', 'random', 'auto')
@@ -143,7 +144,8 @@ class FeatureStore:
   """Clouds, keypoint indices and descriptors per (file, method), computed once.
 
   models: {checkpoint name: inference.Model}; seed: for `random` keypoints;
-  fpfh_max_nn: neighbour cap of FPFH's 4 m searches; level: 'ground' levels each cloud as
+  fpfh_max_nn: neighbour cap of FPFH's 4 m searches; num_keypoints: farthest-point
+  keypoints per cloud of the 'auto' rows (the register command's 1,024); level: 'ground' levels each cloud as
   it is read (`leveling.level`, as the register command's `--level=ground`: a scan tilted
   3 degrees or more is turned about its sensor so that its ground is horizontal, one
   without ground or too sparse is used as it is), and the pairs' ground truth is then
@@ -152,9 +154,13 @@ class FeatureStore:
   """
 
   def __init__(self, models: Mapping, seed: int = 0,
-               fpfh_max_nn: int = features_lib.FPFH_MAX_NN, level: str = 'none'):
+               fpfh_max_nn: int = features_lib.FPFH_MAX_NN, level: str = 'none',
+               num_keypoints: int = keypoints_lib.FARTHEST_POINT_KEYPOINTS):
     if level not in pipeline.LEVELS:
       raise errors.UserError(f'level must be one of {pipeline.LEVELS}, got {level!r}')
+    if not (isinstance(num_keypoints, int) and num_keypoints >= 3):
+      raise errors.UserError(f'num_keypoints must be a whole number >= 3, got {num_keypoints!r}')
+    self.num_keypoints = num_keypoints
     self.level = level
     self._levelings: dict[str, leveling.Leveling] = {}
     self.models = dict(models)
@@ -236,7 +242,7 @@ class FeatureStore:
       points = self.cloud(path)
       t0 = time.perf_counter()
       if source == 'auto':
-        idx, self._coarse[str(path)] = pipeline.auto_keypoints(points)
+        idx, self._coarse[str(path)] = pipeline.auto_keypoints(points, self.num_keypoints)
       elif source in BUILTIN_KEYPOINTS:
         # The protocol: a detector that finds too few keypoints fails the pair.
         idx, _ = pipeline.compute_keypoints(points, source, seed=self.seed, fallback=False)
