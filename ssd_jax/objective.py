@@ -53,6 +53,8 @@ def partner_indices(centers1: jax.Array, pc2: jax.Array, valid2: jax.Array,
   drawn uniformly (`key`) from the horizontal disc of that radius around it.
   centers1 [B, k, 3], pc2 [B, N, 3] metres, valid2 [B, N], r_gt [B, 3, 3] -> [B, k] int32
   indices into pc2."""
+  if jitter > 0 and key is None:
+    raise ValueError(f'partner_indices: a jitter of {jitter} m needs a PRNG key')
   target = jnp.einsum('bki,bji->bkj', centers1, r_gt)
   if jitter > 0:
     # Registration's keypoints are sampled in each cloud on its own, so a keypoint's

@@ -183,3 +183,5 @@ def test_jittered_partners_lie_within_the_jitter_of_the_exact_ones_and_are_seede
   assert far.max() < 1.5 + 0.08 and np.median(far) > 0.8     # uniform in the disc: 1.06
   np.testing.assert_array_equal(np.asarray(jittered(0)), np.asarray(jittered(0)))
   assert (np.asarray(jittered(1)) != np.asarray(jittered(0))).mean() > 0.9
+  with pytest.raises(ValueError, match='needs a PRNG key'):
+    objective.partner_indices(centres, pc2, valid2, eye, jitter=1.5)

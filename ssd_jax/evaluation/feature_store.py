@@ -145,12 +145,12 @@ class FeatureStore:
 
   models: {checkpoint name: inference.Model}; seed: for `random` keypoints;
   fpfh_max_nn: neighbour cap of FPFH's 4 m searches; num_keypoints: farthest-point
-  keypoints per cloud of the 'auto' rows (the register command's 1,024); level: 'ground' levels each cloud as
-  it is read (`leveling.level`, as the register command's `--level=ground`: a scan tilted
-  3 degrees or more is turned about its sensor so that its ground is horizontal, one
-  without ground or too sparse is used as it is), and the pairs' ground truth is then
-  taken between the levelled clouds (`in_levelled_frames`). `seconds` sums the time spent
-  per step ('keypoints:iss', 'descriptors:fpfh', ...).
+  keypoints per cloud of the 'auto' rows (the register command's 1,024); level: 'ground'
+  levels each cloud as it is read (`leveling.level`, as the register command's
+  `--level=ground`: a scan tilted 3 degrees or more is turned about its sensor so that its
+  ground is horizontal, one without ground or too sparse is used as it is), and the pairs'
+  ground truth is then taken between the levelled clouds (`in_levelled_frames`).
+  `seconds` sums the time spent per step ('keypoints:iss', 'descriptors:fpfh', ...).
   """
 
   def __init__(self, models: Mapping, seed: int = 0,
