@@ -36,6 +36,10 @@ def get_config() -> ml_collections.ConfigDict:
   config.seed = 0                 # RANSAC samples of pair n use seed * 1,000,003 + n
   config.fpfh_max_nn = 0          # neighbour cap of FPFH's 4 m searches (0: none, the paper's)
   config.num_keypoints = 1024     # farthest-point keypoints per cloud of the 'auto' rows
+  # The upright rows' matches and samples (ssd_jax.registration.pipeline.SAMPLINGS): 'auto'
+  # (the register command's: 'compatible' for a row's best pose, 'uniform' where a row
+  # verifies its candidates), 'compatible' or 'uniform' (nearest neighbours, uniform draws).
+  config.sampling = 'auto'
   config.level = 'none'           # 'ground': level each tilted scan first (register --level)
   config.evals = ml_collections.ConfigDict()
   return config

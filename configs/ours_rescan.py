@@ -13,8 +13,8 @@ Command (the main job's synthetic set first):
 
 Expected (2-core CPU VM, ~27 minutes with a second run sharing the cores): the
 descriptor alone (farthest-point keypoints, upright RANSAC, no verification) on the
-cross-sensor test sets, synthetic 65.0 % (`ours` 43.3 %, FPFH 48.3 %; with
-`--config.seed=1` 55.0 %), real 93.8 % (`ours` 92.7 %; seed 1 93.8 %); the model card
+cross-sensor test sets, synthetic 67.5 % (`ours` 51.7 %, FPFH 55.8 %; with
+`--config.seed=1` 60.8 %), real 93.8 % (`ours` 92.7 %); the model card
 (ssd_jax/weights/ours_rescan/MODEL_CARD.md) has the paper-protocol rows and the ablation.
 """
 

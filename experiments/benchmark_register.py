@@ -3,7 +3,8 @@ success on the same pairs, in one run.
 
     python -m experiments.benchmark_register \
         [--datasets=data_cache/cross_sensor/real,data_cache/real_pairs] [--num_pairs=0] \
-        [--cold_pairs=3] [--loop_scans=12] [--methods=register,open3d,kiss_matcher]
+        [--cold_pairs=3] [--loop_scans=12] [--methods=register,open3d,kiss_matcher] \
+        [--register_flags=--sampling=uniform]
 
 Methods, each on every pair of each set (`--num_pairs`: the first N, 0 all):
 
@@ -60,6 +61,8 @@ flags.DEFINE_integer('loop_scans', 12, 'Loop-closure list: every pair among the 
                      'clouds of the first set (0: none).')
 flags.DEFINE_list('methods', ['register', 'open3d', 'kiss_matcher'], 'Rows.')
 flags.DEFINE_float('kiss_voxel', 0.3, "KISS-Matcher's voxel size (metres).")
+flags.DEFINE_list('register_flags', [], 'Extra flags of the register command, e.g. '
+                  '--register_flags=--sampling=uniform (an ablation of its defaults).')
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 METHODS = ('register', 'open3d', 'kiss_matcher')
@@ -122,7 +125,8 @@ def _register_command(pairs: list[tuple[str, str]], tmp: str) -> tuple[float, li
     f.writelines(f'{os.path.abspath(a)} {os.path.abspath(b)}\n' for a, b in pairs)
   t0 = time.perf_counter()
   run = subprocess.run([sys.executable, '-m', 'experiments.register', f'--pairs={pairs_file}',
-                        f'--out={out}', '--noprogress'], cwd=ROOT, capture_output=True, text=True)
+                        f'--out={out}', '--noprogress', *FLAGS.register_flags], cwd=ROOT,
+                       capture_output=True, text=True)
   wall = time.perf_counter() - t0
   # Pairs it could not register (loop-closure candidates that do not overlap) end the
   # command non-zero with their rows written; anything else is a failure of the benchmark.

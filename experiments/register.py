@@ -40,6 +40,10 @@ flags.DEFINE_enum('keypoints', DEFAULTS.keypoints, pipeline.KEYPOINTS, 'auto: 1,
 flags.DEFINE_enum('ransac', DEFAULTS.estimator, pipeline.ESTIMATORS,
                   'upright: 2-point samples of a turn about z and a shift (z up); rigid: '
                   "3-point samples, any rotation (the paper's).")
+flags.DEFINE_enum('sampling', DEFAULTS.sampling, pipeline.SAMPLINGS, "Upright RANSAC's "
+                  'matches and samples: compatible (matches both ways, samples among pairs '
+                  'that one turn and shift fit), uniform (nearest neighbours, uniform '
+                  'draws), auto (compatible with --verify=0, else uniform).')
 flags.DEFINE_integer('verify', DEFAULTS.verify, "Check RANSAC's this many distinct best poses "
                      "against the clouds by ICP; 0 keeps RANSAC's best.")
 flags.DEFINE_integer('bev', DEFAULTS.bev, "Also check the bird's-eye-view search's this many "
@@ -72,7 +76,7 @@ def _options(descriptor: str) -> pipeline.Options:
                            "about z only, and are checked with RANSAC's)")
   return pipeline.Options(FLAGS.keypoints, descriptor, FLAGS.ransac, FLAGS.verify, FLAGS.bev,
                           FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed,
-                          FLAGS.level)
+                          FLAGS.level, FLAGS.sampling)
 
 
 def _read(path: str) -> np.ndarray:

@@ -9,7 +9,8 @@ from scipy import spatial
 from ssd_jax import geometry
 from ssd_jax.data import clean, groundtruth, io, registration_sets
 from ssd_jax.evaluation import registration
-from ssd_jax.registration import features, keypoints, metrics, pipeline, ransac, reference
+from ssd_jax.registration import features, keypoints, matching, metrics, pipeline, ransac
+from ssd_jax.registration import reference
 from ssd_jax.synthetic import trajectory
 from tests.conftest import shared_path
 
@@ -410,3 +411,68 @@ def test_verification_picks_the_pose_the_clouds_agree_with_among_ransacs_runners
   near = np.stack([res.transform, res.transform @ geometry.make_transform(np.eye(3),
                                                                           np.array([1.0, 0, 0]))])
   assert ransac.distinct_best(near, np.array([5, 4]), 2) == [0]
+
+
+def _upright_correspondences(rng, n, inliers):
+  """n matches of upright scans, the first `inliers` of them correct (5 cm noise)."""
+  t_true = geometry.make_transform(geometry.rotation_z(np.radians(-70.0)), np.array([9.0, 4, 0.3]))
+  xyz2 = np.concatenate([rng.uniform(-40, 40, (n, 2)), rng.uniform(-2, 4, (n, 1))], 1)
+  xyz1 = xyz2 @ t_true[:3, :3].T + t_true[:3, 3] + rng.normal(0, 0.05, (n, 3))
+  xyz1[inliers:] = np.concatenate([rng.uniform(-40, 40, (n - inliers, 2)),
+                                   rng.uniform(-2, 4, (n - inliers, 1))], 1)
+  return t_true, xyz1, xyz2
+
+
+def test_compatible_pairs_keep_every_pair_of_correct_matches_and_few_others(monkeypatch):
+  _, xyz1, xyz2 = _upright_correspondences(np.random.default_rng(0), 1000, 12)
+  pairs = ransac.compatible_pairs(xyz1, xyz2, 1.0)
+  assert np.all(pairs[:, 0] < pairs[:, 1])
+  kept = {tuple(p) for p in pairs.tolist()}
+  assert all((i, j) in kept for i in range(12) for j in range(i + 1, 12))
+  # A random pair passes when two random distances and two random height shifts agree
+  # within 1 m: a few per cent of the 499,500 pairs.
+  assert 0.001 < len(pairs) / (1000 * 999 / 2) < 0.05
+  monkeypatch.setattr(ransac, 'PAIR_BLOCK', 97)   # blocks that do not divide the matches
+  np.testing.assert_array_equal(ransac.compatible_pairs(xyz1, xyz2, 1.0), pairs)
+
+
+def test_compatible_samples_find_the_pose_where_uniform_draws_run_out():
+  """12 correct matches of 1,000 (1.2 %): a uniform 2-point sample is all-inlier once in
+  ~7,600 draws, so 10,000 trials find the pose about as often as not and the stopping
+  rule is never met; among the compatible pairs one sample in a few hundred is."""
+  t_true, xyz1, xyz2 = _upright_correspondences(np.random.default_rng(0), 1000, 12)
+  samples, pairs = ransac.draw_compatible_samples(np.random.default_rng(1), xyz1, xyz2,
+                                                  10_001, 1.0)
+  assert len(samples) == min(pairs, 10_001) and len(np.unique(samples, axis=0)) == len(samples)
+  guided = ransac.ransac_upright(xyz1, xyz2, samples, pairs=pairs)
+  err = metrics.registration_errors(t_true, guided.transform)
+  assert err['rte'] < 0.1 and err['rre_geodesic'] < 0.2, err
+  assert guided.inliers[:12].all() and guided.trials < 2000
+  uniform = ransac.ransac_upright(
+      xyz1, xyz2, ransac.draw_upright_samples(np.random.default_rng(1), xyz2, 10_001))
+  assert uniform.trials == 10_001
+  # No compatible pair (matches 9 m apart in cloud 1, 5 m in cloud 2): the uniform
+  # draws, so RANSAC still has samples.
+  samples, pairs = ransac.draw_compatible_samples(
+      np.random.default_rng(1), np.array([[0.0, 0, 0], [9.0, 0, 0]]),
+      np.array([[0.0, 0, 0], [5.0, 0, 0]]), 11, 1.0)
+  assert pairs == 0 and samples.shape == (11, 2)
+
+
+def test_matches_both_ways_add_the_sparser_clouds_nearest_neighbours():
+  desc1 = np.array([[0.0], [1.0], [2.0], [10.0]])
+  desc2 = np.array([[0.1], [9.0], [9.5]])
+  # Cloud 1 -> 2: 0->0, 1->0, 2->0, 10->2; cloud 2 -> 1: 0.1->0, 9->3, 9.5->3.
+  np.testing.assert_array_equal(matching.both_ways_matches(desc1, desc2),
+                                [[0, 0], [1, 0], [2, 0], [3, 1], [3, 2]])
+  t_true, xyz1, xyz2 = _upright_correspondences(np.random.default_rng(2), 300, 30)
+  f1 = pipeline.CloudFeatures(xyz1, np.eye(300), {})
+  f2 = pipeline.CloudFeatures(xyz2, np.eye(300), {})
+  for sampling in pipeline.SAMPLINGS:
+    reg = pipeline.estimate(f1, f2, estimator='upright', sampling=sampling)
+    np.testing.assert_array_equal(reg.matches, np.stack([np.arange(300)] * 2, 1))
+    assert metrics.registration_errors(t_true, reg.transform)['success'], sampling
+  with pytest.raises(ValueError, match='sampling must be one of'):
+    pipeline.estimate(f1, f2, estimator='upright', sampling='guided')
+  with pytest.raises(Exception, match='sampling must be one of'):
+    pipeline.Options(sampling='guided')

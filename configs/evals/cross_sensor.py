@@ -17,13 +17,15 @@ Writes WORKDIR/<set>.md (summary, one success matrix per method) and <set>.csv (
 RTE, RRE and inlier ratio per method x unit x distance). docs/notes/cross_sensor.md has the
 protocol and every cell.
 
-Expected (2-core AMD EPYC VM, ~28 minutes with every row: docs/notes/benchmarks.md): real
-re-scans (96 pairs), defaults + ours 99.0 %, defaults + FPFH 97.9 %, BEV alone 92.7 %,
-farthest-point + upright ours 92.7 %, Open3D's pipeline 38.5 % (its RANSAC is not
-repeatable: +-1 pair), paper protocol ISS + ours 49.0 %, ISS + FPFH 36.5 %; synthetic (120
-pairs), defaults + FPFH 94.2 %, defaults + ours 94.2 %, BEV alone 93.3 %, farthest-point +
-upright FPFH 48.3 % / ours 43.3 %, Open3D 15.8 %. `ours_rescan`: farthest-point +
-upright 93.8 % (real) / 65.0 % (synthetic), ISS 62.5 / 29.2 %, defaults 99.0 / 94.2 %.
+Expected (2-core AMD EPYC VM, ~28 minutes with every row, the VM alone:
+docs/notes/benchmarks.md): real re-scans (96 pairs), defaults + ours 99.0 %, defaults +
+FPFH 97.9 %, BEV alone 92.7 %, farthest-point + upright ours 92.7 % / FPFH 81.2 %,
+Open3D's pipeline 38.5 % (its RANSAC is not repeatable: +-1 pair), paper protocol ISS +
+ours 50.0 %, ISS + FPFH 36.5 %; synthetic (120 pairs), defaults + FPFH 94.2 %, defaults +
+ours 94.2 %, BEV alone 93.3 %, farthest-point + upright FPFH 55.8 % / ours 51.7 %, Open3D
+13.3 %. `ours_rescan`: farthest-point + upright 93.8 % (real) / 67.5 % (synthetic), ISS
+62.5 / 29.2 %, defaults 99.0 / 94.2 %. `--config.sampling=uniform`: the upright rows with
+cloud 1's nearest neighbours and uniform draws (docs/notes/cross_sensor.md).
 """
 
 import ml_collections

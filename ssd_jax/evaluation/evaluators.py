@@ -101,7 +101,8 @@ def _registration(name, ev, ctx: Context) -> Section:
     results = registration.register_pairs(
         pairs, feature_store.runnable_rows(rows, ctx.missing), ctx.store, seed=cfg.seed,
         inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
-        max_trials=cfg.max_trials, log=log, desc=name)
+        max_trials=cfg.max_trials, log=log, desc=name,
+        sampling=cfg.get('sampling', 'auto'))
   return Section(ev.title, report.registration_outputs(
       pairs, results, rows, ctx.missing, str(ctx.workdir), ev.paper, description, name))
 
@@ -118,7 +119,8 @@ def _cross_sensor(name, ev, ctx: Context) -> Section:
     results = registration.register_pairs(
         pairs, feature_store.runnable_rows(store_rows, ctx.missing), ctx.store, seed=cfg.seed,
         inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
-        max_trials=cfg.max_trials, log=log, desc=name)
+        max_trials=cfg.max_trials, log=log, desc=name,
+        sampling=cfg.get('sampling', 'auto'))
     for row in (r for r in rows if r in cross_sensor.CLOUD_ROWS):
       results[row] = cross_sensor.register_clouds(pairs, ctx.store, row, seed=cfg.seed, log=log,
                                                   desc=f'{name} {row}')
@@ -206,8 +208,8 @@ def _registration_figures(name, ev, ctx: Context, set_name, pair, skipped) -> li
                             inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
                             max_trials=cfg.max_trials)
     file = f'{name}_{set_name}_{row.replace("+", "_")}.png'
-    viz.plot_registration(ctx.store.cloud(pair.cloud1), ctx.store.cloud(pair.cloud2), f1.xyz,
-                          f2.xyz[reg.matches[:, 1]], reg.inliers, ctx.workdir / file,
+    viz.plot_registration(ctx.store.cloud(pair.cloud1), ctx.store.cloud(pair.cloud2),
+                          f1.xyz[reg.matches[:, 0]], f2.xyz[reg.matches[:, 1]], reg.inliers, ctx.workdir / file,
                           title=f'{label}: {int(reg.inliers.sum())} inliers of '
                                 f'{len(reg.inliers)} matches')
     parts.append(f'{set_name}, {label}, pair {pair.idx1}/{pair.idx2} ({pair.sequence}):\n\n'

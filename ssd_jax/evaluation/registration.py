@@ -10,7 +10,7 @@ import jax
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import distributed, geometry
+from ssd_jax import distributed, errors, geometry
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import feature_store, paper, tables
 from ssd_jax.registration import metrics, pipeline
@@ -30,10 +30,12 @@ def summarize(results: list[dict]) -> dict[str, float]:
 def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.FeatureStore, *,
                    seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
                    max_trials: int = 10_000, log: TextIO | None = None,
-                   progress: bool = True, desc: str = 'registration') -> dict[str, list[dict]]:
+                   progress: bool = True, desc: str = 'registration',
+                   sampling: str = 'auto') -> dict[str, list[dict]]:
   """Register every pair with every row -> {row: [per-pair result]}.
 
-  pairs: `registration_sets.RegistrationPair`s. Pair n's RANSAC samples are seeded with
+  pairs: `registration_sets.RegistrationPair`s; `sampling`: the upright rows' matches and
+  samples (`pipeline.SAMPLINGS`). Pair n's RANSAC samples are seeded with
   seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
   result holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair
   with fewer than 3 keypoints in a cloud fails, with its `error`; a verified row's pose that
@@ -42,6 +44,8 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   registers its share of the pairs (`distributed.map_items`) and every process returns
   all results; the log is written when they are gathered.
   """
+  if sampling not in pipeline.SAMPLINGS:
+    raise errors.UserError(f'sampling must be one of {pipeline.SAMPLINGS}, got {sampling!r}')
   one_process = jax.process_count() == 1
   store.describe_fpfh_together(rows)
 
@@ -58,7 +62,8 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
             confidence=confidence, max_trials=max_trials,
             estimator=feature_store.row_estimator(row),
             candidates=feature_store.VERIFY_CANDIDATES if verify else 1,
-            bev_candidates=feature_store.row_bev_candidates(row), verified=verify)
+            bev_candidates=feature_store.row_bev_candidates(row), verified=verify,
+            sampling=sampling)
         if verify:   # as the register command: refused if degenerate
           reg = pipeline.assess(reg, prepared)
       except (io.CloudFileError, clean.CloudDataError):

@@ -11,3 +11,14 @@ def nearest_neighbour_matches(desc1: np.ndarray, desc2: np.ndarray) -> np.ndarra
   cloud 2's [K2, D]. -> [K1] indices into desc2."""
   _, idx = spatial.cKDTree(desc2).query(desc1)
   return idx.astype(np.int64)
+
+
+def both_ways_matches(desc1: np.ndarray, desc2: np.ndarray) -> np.ndarray:
+  """Every descriptor's nearest among the other cloud's, both ways, each pair once:
+  [C, 2] (index into desc1 [K1, D], index into desc2 [K2, D]), C <= K1 + K2, sorted.
+  Where one cloud's view of a place is sparser, its keypoints' nearest neighbours are
+  often the right ones when the denser cloud's are not, so taking both adds correct
+  matches that cloud 1's nearest neighbours alone miss."""
+  forward = np.stack([np.arange(len(desc1)), nearest_neighbour_matches(desc1, desc2)], 1)
+  backward = np.stack([nearest_neighbour_matches(desc2, desc1), np.arange(len(desc2))], 1)
+  return np.unique(np.concatenate([forward, backward]), axis=0)

@@ -30,6 +30,17 @@ DESCRIPTORS = ('fpfh', 'learned')
 # 2-point samples of a turn about z and a translation, for scans whose z axis is up,
 # refit in 6 degrees of freedom (ransac.ransac_upright).
 ESTIMATORS = ('rigid', 'upright')
+# How the upright estimator takes its matches and samples (`estimate`): 'compatible', each
+# keypoint's nearest descriptor both ways (`matching.both_ways_matches`) and 2-point samples
+# drawn among the pairs of matches one turn about z and shift can fit
+# (`ransac.compatible_pairs`); 'uniform', cloud 1's nearest neighbours and uniform draws
+# (the paper's RANSAC with 2-point samples); 'auto', compatible where RANSAC's best pose is
+# the answer, uniform where its distinct best poses are verified against the clouds.
+# Compatible samples crowd into the strongest consensus: on a street that looks alike turned
+# by 180 degrees its 10 distinct best poses can all be variants of the turned one, where
+# uniform draws keep the right pose among them for the verification to pick
+# (docs/registration.md). The rigid estimator always samples uniformly.
+SAMPLINGS = ('auto', 'compatible', 'uniform')
 # Whether each scan is first turned level by its ground (`Options.level`, `leveling`).
 LEVELS = ('none', 'ground')
 # Metres: the voxel grid of every set the shipped models were trained and tested on
@@ -152,13 +163,13 @@ class FeatureLevels:
 @dataclasses.dataclass
 class Registration:
   transform: np.ndarray    # [4, 4] T_12: maps cloud 2 into cloud 1's frame
-  matches: np.ndarray      # [K1, 2] (keypoint of cloud 1, matched keypoint of cloud 2)
-  inliers: np.ndarray      # [K1] bool
+  matches: np.ndarray      # [C, 2] (keypoint of cloud 1, matched keypoint of cloud 2)
+  inliers: np.ndarray      # [C] bool
   trials: int
   seconds: dict
   icp_fitness: float | None = None   # share of cloud-2 points with an ICP partner
   notes: list = dataclasses.field(default_factory=list)   # fallbacks used, one line each
-  # As Open3D's RegistrationResult, over the K1 matches under the final transform: the
+  # As Open3D's RegistrationResult, over the C matches under the final transform: the
   # share within the inlier threshold, their RMSE (metres) and their count.
   fitness: float = 0.0
   inlier_rmse: float = 0.0
@@ -333,21 +344,38 @@ def _match_stats(xyz1: np.ndarray, xyz2: np.ndarray, transform: np.ndarray,
 
 def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_threshold: float = 1.0,
              confidence: float = 0.99, max_trials: int = 10_000,
-             estimator: str = 'rigid', candidates: int = 1) -> Registration:
-  """Nearest-neighbour matches of cloud 1's keypoints among cloud 2's, then RANSAC with
-  the motion model `estimator` (`ESTIMATORS`); with `candidates` > 1 (upright only) the
+             estimator: str = 'rigid', candidates: int = 1,
+             sampling: str = 'auto') -> Registration:
+  """Descriptor matches, then RANSAC with the motion model `estimator` (`ESTIMATORS`):
+  the rigid one over the nearest neighbours of cloud 1's keypoints among cloud 2's, the
+  upright one as `sampling` says (`SAMPLINGS`). With `candidates` > 1 (upright only) the
   result keeps that many distinct best poses for `verify`."""
   if estimator not in ESTIMATORS:
     raise ValueError(f'estimator must be one of {ESTIMATORS}, got {estimator!r}')
+  if sampling not in SAMPLINGS:
+    raise ValueError(f'sampling must be one of {SAMPLINGS}, got {sampling!r}')
   if len(f1.xyz) < 3 or len(f2.xyz) < 3:
     raise ValueError(f'too few keypoints to register ({len(f1.xyz)} and {len(f2.xyz)}; at '
                      'least 3 each): is the cloud degenerate (empty, planar or collinear)?')
   t0 = time.perf_counter()
-  nn = matching.nearest_neighbour_matches(f1.descriptors, f2.descriptors)
-  xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[nn].astype(np.float64)
+  if sampling == 'auto':
+    sampling = 'compatible' if candidates <= 1 else 'uniform'
+  compatible = estimator == 'upright' and sampling == 'compatible'
+  if compatible:
+    matches = matching.both_ways_matches(f1.descriptors, f2.descriptors)
+  else:
+    nn = matching.nearest_neighbour_matches(f1.descriptors, f2.descriptors)
+    matches = np.stack([np.arange(len(nn)), nn], 1)
+  xyz1 = f1.xyz[matches[:, 0]].astype(np.float64)
+  xyz2 = f2.xyz[matches[:, 1]].astype(np.float64)
   t1 = time.perf_counter()
   rng = np.random.default_rng(seed)
-  if estimator == 'upright':
+  if compatible:
+    samples, pairs = ransac.draw_compatible_samples(rng, xyz1, xyz2, max_trials + 1,
+                                                    inlier_threshold)
+    res = ransac.ransac_upright(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials,
+                               candidates=candidates, pairs=pairs)
+  elif estimator == 'upright':
     samples = ransac.draw_upright_samples(rng, xyz2, max_trials + 1)
     res = ransac.ransac_upright(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials,
                                candidates=candidates)
@@ -355,7 +383,7 @@ def estimate(f1: CloudFeatures, f2: CloudFeatures, seed: int = 0, inlier_thresho
     samples = ransac.draw_minimal_samples(rng, xyz2, max_trials + 1)
     res = ransac.ransac(xyz1, xyz2, samples, inlier_threshold, confidence, max_trials)
   t2 = time.perf_counter()
-  return Registration(res.transform, np.stack([np.arange(len(nn)), nn], 1), res.inliers,
+  return Registration(res.transform, matches, res.inliers,
                       res.trials, {'matching': t1 - t0, 'ransac': t2 - t1},
                       candidates=res.candidates,
                       **_match_stats(xyz1, xyz2, res.transform, inlier_threshold)[1])
@@ -399,7 +427,8 @@ def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1, poi
                                                    memo=pair.memo)
       seconds['bev'] = t2 - t1
       seconds['verify'] += time.perf_counter() - t2
-  xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[reg.matches[:, 1]].astype(np.float64)
+  xyz1 = f1.xyz[reg.matches[:, 0]].astype(np.float64)
+  xyz2 = f2.xyz[reg.matches[:, 1]].astype(np.float64)
   inliers, stats = _match_stats(xyz1, xyz2, refined[best], inlier_threshold)
   return dataclasses.replace(reg, transform=refined[best], inliers=inliers, seconds=seconds,
                              verified_fitness=fitness, verified_poses=refined, **stats)
@@ -409,7 +438,8 @@ def coarse_to_fine(levels1: Sequence[Callable[[], CloudFeatures]],
                    levels2: Sequence[Callable[[], CloudFeatures]], points1, points2=None, *,
                    seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
                    max_trials: int = 10_000, estimator: str = 'upright', candidates: int = 10,
-                   bev_candidates: int = 0, verified: bool = True, progress=None
+                   bev_candidates: int = 0, verified: bool = True, progress=None,
+                   sampling: str = 'auto'
                    ) -> tuple[Registration, CloudFeatures, CloudFeatures]:
   """`estimate` (`candidates` poses) and, where `verified`, `verify` on each level of the
   two clouds' features in turn (callables, coarse first: `FeatureLevels.levels`), until a
@@ -418,7 +448,7 @@ def coarse_to_fine(levels1: Sequence[Callable[[], CloudFeatures]],
   The last level is the registration without levels, the BEV search's candidates
   included; the ones before only end it early (unverified, only the last level runs).
   points1, points2: as for `verify`; `progress(stage)` as for `register`, on the first
-  level tried. -> (registration, features of cloud 1, of cloud 2) of the level that
+  level tried; `sampling` as for `estimate`. -> (registration, features of cloud 1, of cloud 2) of the level that
   decided, its `seconds` summed over the levels tried and `levels_tried` set."""
   if not levels1 or len(levels1) != len(levels2):
     raise ValueError(f'the clouds have {len(levels1)} and {len(levels2)} feature levels')
@@ -433,7 +463,7 @@ def coarse_to_fine(levels1: Sequence[Callable[[], CloudFeatures]],
     if n == first:
       stage('RANSAC')
     reg = estimate(f1, f2, seed, inlier_threshold, confidence, max_trials, estimator,
-                   candidates)
+                   candidates, sampling)
     if verified:
       if n == first:
         stage('verification')
@@ -496,6 +526,10 @@ class Options:
   descriptor  DESCRIPTORS: 'learned' (needs a model) or 'fpfh'.
   estimator   ESTIMATORS: 'upright' (2-point samples of a turn about z and a shift, for
               scans whose z axis is up) or 'rigid' (3-point samples, any rotation).
+  sampling    SAMPLINGS, the upright estimator's matches and samples: 'compatible'
+              (matches both ways, samples among the pairs of matches that one turn
+              about z and shift can fit), 'uniform' (cloud 1's nearest neighbours,
+              uniform draws) or 'auto' (compatible with verify = 0, else uniform).
   verify      RANSAC's this many distinct best poses checked against the clouds by ICP
               (`verification`); 0 keeps RANSAC's best as it is.
   bev         the bird's-eye-view search's this many best poses checked with them, where
@@ -527,10 +561,12 @@ class Options:
   fpfh_max_nn: int = features.FPFH_MAX_NN
   seed: int = 0
   level: str = 'ground'
+  sampling: str = 'auto'
 
   def __post_init__(self):
     for name, allowed in (('keypoints', KEYPOINTS), ('descriptor', DESCRIPTORS),
-                          ('estimator', ESTIMATORS), ('level', LEVELS)):
+                          ('estimator', ESTIMATORS), ('level', LEVELS),
+                          ('sampling', SAMPLINGS)):
       if getattr(self, name) not in allowed:
         raise errors.UserError(f'{name} must be one of {allowed}, got {getattr(self, name)!r}')
     for name, meaning in (('verify', '0: no verification'), ('bev', '0: no BEV search'),
@@ -545,7 +581,8 @@ class Options:
     """The paper's protocol: ISS keypoints, RANSAC over any rotation, no verification,
     the clouds as given."""
     return cls(**{'keypoints': 'iss', 'descriptor': descriptor, 'estimator': 'rigid',
-                  'verify': 0, 'bev': 0, 'level': 'none', **overrides})
+                  'verify': 0, 'bev': 0, 'level': 'none', 'sampling': 'uniform',
+                  **overrides})
 
   @property
   def bev_candidates(self) -> int:
@@ -579,7 +616,7 @@ def _register_levels(levels, fallback, cloud1, cloud2, options: Options, progres
     return coarse_to_fine(levels1.levels, levels2.levels, cloud1, cloud2, seed=options.seed,
                           estimator=options.estimator, candidates=max(options.verify, 1),
                           bev_candidates=options.bev_candidates, verified=options.verify > 0,
-                          progress=progress)
+                          progress=progress, sampling=options.sampling)
   try:
     return (*run(*levels), levels, '')
   except ValueError as e:

@@ -101,12 +101,17 @@ def _check_samples(samples: np.ndarray, max_trials: int) -> None:
 
 
 def _adaptive_trials(score: int, n: int, confidence: float, min_trials: int,
-                     sample_size: int = 3) -> float:
+                     sample_size: int = 3, pairs: int = 0) -> float:
   """N = log(1 - p) / log(1 - w^s), at least `min_trials`: the trials after which a sample
   of s correspondences all inliers (w = score / n of them) has been drawn with
-  probability p."""
-  w = score / n
-  p_no_outliers = min(max(1.0 - w ** sample_size, np.finfo(float).eps),
+  probability p. Samples drawn among `pairs` > 0 compatible pairs (`compatible_pairs`)
+  are all inliers with probability score (score - 1) / 2 / pairs instead: the inliers'
+  pairs among them."""
+  if pairs > 0:
+    good = score * (score - 1) / 2.0 / pairs
+  else:
+    good = (score / n) ** sample_size
+  p_no_outliers = min(max(1.0 - good, np.finfo(float).eps),
                       1.0 - np.finfo(float).eps)
   return max(float(min_trials), np.log(1.0 - confidence) / np.log(p_no_outliers))
 
@@ -236,17 +241,19 @@ def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
 
 
 def _replay(score, samples, n, confidence, max_trials, min_trials, batch_size,
-            fixed_shape: bool = False) -> tuple[int, int, int, np.ndarray]:
+            fixed_shape: bool = False, pairs: int = 0) -> tuple[int, int, int, np.ndarray]:
   """The sequential stopping rule over batches of inlier counts: the one RANSAC loop of
   both motion models. score(samples [B, s]) -> inlier counts [B] of the hypotheses of a
-  batch of samples [T, s] (s = 3 rigid, 2 upright: the rule's N uses w^s). Batches grow
+  batch of samples [T, s] (s = 3 rigid, 2 upright: the rule's N uses w^s, or the
+  inliers' share of `pairs` compatible pairs, `_adaptive_trials`). Batches grow
   FIRST_BATCH, 2x, ... up to `batch_size`; with `fixed_shape` the last one repeats its
-  final sample to full size (one jitted shape; the repeats are not replayed).
+  final sample to full size (one jitted shape; the repeats are not replayed). The loop
+  also ends with the samples.
   -> (trials, index of the best trial, its inlier count, the counts of the trials [trials])."""
   sample_size = samples.shape[1]
   best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)
   size, scored = min(FIRST_BATCH, batch_size), []
-  while needed > trials and trials <= max_trials:
+  while needed > trials and trials <= max_trials and trials < len(samples):
     batch = samples[trials: min(trials + size, max_trials + 1)]
     if fixed_shape and len(batch) < size:
       batch = np.concatenate([batch, np.repeat(batch[-1:], size - len(batch), 0)])
@@ -255,9 +262,9 @@ def _replay(score, samples, n, confidence, max_trials, min_trials, batch_size,
     for s in scores.tolist():
       if s >= best_score:
         best_score, best_trial = s, trials
-        needed = _adaptive_trials(s, n, confidence, min_trials, sample_size)
+        needed = _adaptive_trials(s, n, confidence, min_trials, sample_size, pairs)
       trials += 1
-      if not needed > trials or trials > max_trials:
+      if not needed > trials or trials > max_trials or trials == len(samples):
         break
     size = min(2 * size, batch_size)
   return trials, best_trial, best_score, np.concatenate(scored)[:trials]
@@ -303,6 +310,60 @@ def draw_upright_samples(rng: np.random.Generator, xyz2: np.ndarray, num_trials:
       f'{UPRIGHT_MIN_SEPARATION} m of each other horizontally)')
 
 
+PAIR_BLOCK = 512   # correspondences a block of `compatible_pairs` compares with all others
+
+
+# Compatible pairs (Open3D's edge-length checker, used to draw samples rather than to
+# reject them): two correct matches of upright scans keep their horizontal distance and
+# share one height shift. Far apart scans of one street leave ~1-2 % of the
+# nearest-neighbour matches correct; a uniform 2-point sample is then all-inlier once in
+# 2,500-10,000 draws, while ~2 % of all pairs pass the check and the inliers' pairs are
+# among them: one compatible sample in ~100-1,000 is all-inlier.
+def compatible_pairs(xyz1: np.ndarray, xyz2: np.ndarray, tolerance: float,
+                     min_separation: float = UPRIGHT_MIN_SEPARATION) -> np.ndarray:
+  """Pairs (i < j) [E, 2] of correspondences xyz1[i] <-> xyz2[i] ([C, 3] metres) that one
+  turn about z and shift can map onto each other: horizontal distances within
+  `tolerance` metres of each other (at least `min_separation` in cloud 2, else the pair
+  fixes no yaw) and height shifts within `tolerance`."""
+  p, q = np.asarray(xyz1, np.float32).T, np.asarray(xyz2, np.float32).T   # [3, C]
+  shift = p[2] - q[2]
+  found = [np.zeros((0, 2), np.int64)]
+
+  def distances(c, rows, cols):   # horizontal, [rows, cols], as [B, C] planes
+    dx = c[0, rows, None] - c[0, None, cols]
+    dy = c[1, rows, None] - c[1, None, cols]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return np.sqrt(dx, out=dx)
+
+  # Rows in blocks against the columns after the block's first row: [block, C] matrices,
+  # not [C, C] (ISS keypoints may number thousands), and only pairs i < j computed.
+  for start in range(0, p.shape[1], PAIR_BLOCK):
+    rows, cols = slice(start, start + PAIR_BLOCK), slice(start + 1, None)
+    d2 = distances(q, rows, cols)
+    ok = d2 >= min_separation
+    d2 -= distances(p, rows, cols)
+    ok &= np.abs(d2) < tolerance
+    ok &= np.abs(shift[rows, None] - shift[None, cols]) < tolerance
+    i, j = np.nonzero(ok)
+    j += start + 1
+    keep = j > i + start
+    found.append(np.stack([i[keep] + start, j[keep]], 1).astype(np.int64))
+  return np.concatenate(found)
+
+
+def draw_compatible_samples(rng: np.random.Generator, xyz1: np.ndarray, xyz2: np.ndarray,
+                            num_trials: int, tolerance: float) -> tuple[np.ndarray, int]:
+  """Upright RANSAC's samples drawn among the `compatible_pairs` without repeats: -> (up
+  to `num_trials` of them [T, 2], how many pairs there are). Where no pair is
+  compatible, `draw_upright_samples`' uniform draws and 0."""
+  pairs = compatible_pairs(xyz1, xyz2, tolerance)
+  if not len(pairs):
+    return draw_upright_samples(rng, xyz2, num_trials), 0
+  return pairs[rng.permutation(len(pairs))[:num_trials]], len(pairs)
+
+
 # Two hypotheses closer than this (metres, degrees) are one candidate pose.
 CANDIDATE_SEPARATION = (2.0, 5.0)
 # With candidates, RANSAC scores at least this many trials: where a repeated structure's
@@ -336,17 +397,21 @@ def distinct_best(transforms: np.ndarray, scores: np.ndarray, k: int,
 def ransac_upright(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
                    inlier_threshold: float = 1.0, confidence: float = 0.99,
                    max_trials: int = 10_000, min_trials: int = 10,
-                   batch_size: int = 512, candidates: int = 1) -> RansacResult:
+                   batch_size: int = 512, candidates: int = 1, pairs: int = 0
+                   ) -> RansacResult:
   """RANSAC over 2-point upright hypotheses (`upright_fit`) with the adaptive stopping rule
   of `ransac_sequential` for 2-point samples (N = log(1 - p) / log(1 - w^2); `_replay`).
   Correspondences xyz1[i] <-> xyz2[i] ([C, 3] metres), samples [>= max_trials + 1, 2]
-  from `draw_upright_samples`. The best hypothesis is refit on its inliers in all 6
+  from `draw_upright_samples`; or, with `pairs` > 0, up to max_trials + 1 of that many
+  compatible pairs (`draw_compatible_samples`), the stopping rule then counting the
+  inliers' pairs among them. The best hypothesis is refit on its inliers in all 6
   degrees of freedom (Kabsch), its inliers recounted and the pose refit once more, so a
   scan tilted by a few degrees still comes out exact. With `candidates` > 1 the
   result's `candidates` holds up to that many distinct best hypotheses of the trials
   scored (`distinct_best`), each refit alike, and at least CANDIDATE_MIN_TRIALS are
   scored."""
-  _check_samples(samples, max_trials)
+  if not pairs:
+    _check_samples(samples, max_trials)
   thr2 = inlier_threshold * inlier_threshold
   if candidates > 1:
     min_trials = max(min_trials, min(CANDIDATE_MIN_TRIALS, max_trials))
@@ -370,7 +435,7 @@ def ransac_upright(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
     return np.sum(dx < thr2, axis=1)
 
   trials, best_trial, _, scores = _replay(score, samples, len(xyz1), confidence, max_trials,
-                                          min_trials, batch_size)
+                                          min_trials, batch_size, pairs=pairs)
   residual = lambda t: np.sum((xyz2 @ t[:3, :3].T + t[:3, 3] - xyz1) ** 2, -1)
 
   def refit(trial):
