@@ -25,8 +25,7 @@ Commands (~1.5 hours on 2 CPU cores in all):
 nothing in adapt reads it.) Rows: the paper's protocol (ISS, RANSAC over any rotation),
 farthest-point keypoints with upright RANSAC (the descriptor alone: RANSAC's best pose),
 the bird's-eye-view search alone, and the register command's defaults, for each model's
-descriptor. Expected, the descriptor alone with `--config.sampling=uniform` (measured before
-the compatible samples): `ours` 38.5 %, adapted 49.0 / 47.9 % (seeds
+descriptor. Expected, the descriptor alone with `--config.sampling=uniform`: `ours` 38.5 %, adapted 49.0 / 47.9 % (seeds
 0 / 1), adapted_single 46.9 %, adapted_plain 46.9 / 44.8 %; docs/notes/cross_sensor.md
 has the table.
 """

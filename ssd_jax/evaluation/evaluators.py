@@ -209,7 +209,8 @@ def _registration_figures(name, ev, ctx: Context, set_name, pair, skipped) -> li
                             max_trials=cfg.max_trials)
     file = f'{name}_{set_name}_{row.replace("+", "_")}.png'
     viz.plot_registration(ctx.store.cloud(pair.cloud1), ctx.store.cloud(pair.cloud2),
-                          f1.xyz[reg.matches[:, 0]], f2.xyz[reg.matches[:, 1]], reg.inliers, ctx.workdir / file,
+                          f1.xyz[reg.matches[:, 0]], f2.xyz[reg.matches[:, 1]], reg.inliers,
+                          ctx.workdir / file,
                           title=f'{label}: {int(reg.inliers.sum())} inliers of '
                                 f'{len(reg.inliers)} matches')
     parts.append(f'{set_name}, {label}, pair {pair.idx1}/{pair.idx2} ({pair.sequence}):\n\n'

@@ -448,8 +448,9 @@ def coarse_to_fine(levels1: Sequence[Callable[[], CloudFeatures]],
   The last level is the registration without levels, the BEV search's candidates
   included; the ones before only end it early (unverified, only the last level runs).
   points1, points2: as for `verify`; `progress(stage)` as for `register`, on the first
-  level tried; `sampling` as for `estimate`. -> (registration, features of cloud 1, of cloud 2) of the level that
-  decided, its `seconds` summed over the levels tried and `levels_tried` set."""
+  level tried; `sampling` as for `estimate`. -> (registration, features of cloud 1, of
+  cloud 2) of the level that decided, its `seconds` summed over the levels tried and
+  `levels_tried` set."""
   if not levels1 or len(levels1) != len(levels2):
     raise ValueError(f'the clouds have {len(levels1)} and {len(levels2)} feature levels')
   first = 0 if verified else len(levels1) - 1
