@@ -466,3 +466,11 @@ def test_feature_store_takes_as_many_farthest_point_keypoints_as_asked(tmp_path)
   assert set(fewer.tolist()) <= set(default.tolist())
   with pytest.raises(errors.UserError, match='num_keypoints must be a whole number >= 3'):
     feature_store.FeatureStore({}, num_keypoints=0)
+
+
+def test_register_pairs_refuses_an_unknown_sampling_before_any_pair():
+  # A wrong value must stop the evaluation in one line, not fail every pair as a
+  # ValueError from `pipeline.estimate` would.
+  with pytest.raises(errors.UserError, match="sampling must be one of .*got 'guided'"):
+    registration.register_pairs([], ['auto+fpfh+upright'], feature_store.FeatureStore({}),
+                                progress=False, sampling='guided')
