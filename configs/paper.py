@@ -39,6 +39,9 @@ def get_config() -> ml_collections.ConfigDict:
   data.rescan_sensors = ('vlp16', 'hdl32', 'hdl64', 'vls128', 'front120')
   data.rescan_shift = (2.0, 30.0)
   data.rescan_views = 8          # re-scans per cloud (made once, cached)
+  # How the unit's beams make the re-scan (ssd_jax.data.rescan.BEAMS): 'select' keeps the
+  # cloud's points on its beams, 'cast' casts its rays at the cloud's surfaces (its own rings).
+  data.rescan_beams = 'select'
   # Two-view training: with chance pairs_rate per row, the second branch is a real second
   # scan of the place, moved into the first's frame by the transform the miner found
   # (experiments.mine; datasets.MinedPairDataset). `pairs`: the miner's CSV ('' = off,
@@ -62,6 +65,9 @@ def get_config() -> ml_collections.ConfigDict:
   model.contrastive_weight = 0.0
   model.contrastive_radius = 1.0
   model.contrastive_temperature = 0.1
+  # Which rows the InfoNCE scores (objective.CONTRASTIVE_ROWS): 'all', or 'two_view', only
+  # those whose second view is another view of the place (a re-scan, a mined pair).
+  model.contrastive_rows = 'all'
   # PC2's cluster centres its points nearest PC1's (turned by R_gt) instead of a sampling
   # of their own, so every centre where the views overlap has its partner (the InfoNCE's
   # positives); off: each branch samples its own (the paper).

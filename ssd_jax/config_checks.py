@@ -11,7 +11,7 @@ import jax
 import ml_collections
 
 from ssd_jax import augment, config_upgrade, errors, grouping, network, objective, sensors
-from ssd_jax.data import datasets
+from ssd_jax.data import datasets, rescan
 
 AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
 LR_SCHEDULES = ('constant', 'cosine')
@@ -78,6 +78,8 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
     require(len(span) == 2 and 0 <= span[0] <= span[1],
             f'data.rescan_shift must be (low, high) metres with 0 <= low <= high, got {span}')
     require(d.rescan_views >= 1, f'data.rescan_views must be >= 1, got {d.rescan_views}')
+    require(d.rescan_beams in rescan.BEAMS,
+            f'data.rescan_beams must be one of {rescan.BEAMS}, got {d.rescan_beams!r}')
     require(config.objective == 'self_supervised',
             f'data.rescan_rate is for the self-supervised objective, not {config.objective!r}')
   if d.get('pairs'):
@@ -95,6 +97,9 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
   require(m.jitter_sigma >= 0, f'model.jitter_sigma must be >= 0, got {m.jitter_sigma}')
   require(m.contrastive_weight >= 0,
           f'model.contrastive_weight must be >= 0, got {m.contrastive_weight}')
+  require(m.contrastive_rows in objective.CONTRASTIVE_ROWS,
+          f'model.contrastive_rows must be one of {objective.CONTRASTIVE_ROWS}, got '
+          f'{m.contrastive_rows!r}')
   require(m.contrastive_radius > 0 and m.contrastive_temperature > 0,
           'model.contrastive_radius and contrastive_temperature must be > 0, got '
           f'{m.contrastive_radius} and {m.contrastive_temperature}')

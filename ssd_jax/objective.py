@@ -17,6 +17,7 @@ import ml_collections
 from ssd_jax import augment, cf, geometry, grouping
 
 ROTATION_LOSSES = ('frobenius', 'squared_frobenius')
+CONTRASTIVE_ROWS = ('all', 'two_view')
 
 
 def rotation_loss(r_est: jax.Array, r_gt: jax.Array, kind: str = 'frobenius') -> jax.Array:
@@ -112,7 +113,9 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
                          points: jax.Array, valid: jax.Array,
                          cfg: ml_collections.ConfigDict, train: bool = True):
   """The paper's loss (Eq. 6) of a batch of unlabeled clouds, ||I - R R_gt^T||_F (plus
-  `contrastive_weight` times `correspondence_nce` where that is > 0; the paper's: 0).
+  `contrastive_weight` times `correspondence_nce` where that is > 0, on every row or, with
+  `contrastive_rows` 'two_view', on the rows whose second view is not their own points;
+  the paper's: 0).
 
   model: a `FeatureNet` with variables {'params', 'batch_stats'}; key: the step's PRNG
   key; points [B, N, 3] metres, valid [B, N] (or a second view each: see
@@ -142,6 +145,12 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
     nce = jax.vmap(functools.partial(correspondence_nce, radius=cfg.contrastive_radius,
                                      temperature=cfg.contrastive_temperature))(
         centers[:b], back, desc[:b], desc[b:], mask[:b], mask[b:])
+    if cfg.contrastive_rows == 'two_view' and points.ndim == 4:
+      # A row whose second view is its own points (the paper's pair) shares the scan's
+      # rings in both branches, which the InfoNCE would reward matching; only rows with
+      # another view of the place count, averaged over those rows.
+      two_view = jnp.any(points[:, 0] != points[:, 1], axis=(1, 2))
+      nce = jnp.where(two_view, nce, 0.0) * b / jnp.maximum(jnp.sum(two_view), 1)
     per_pair = per_pair + cfg.contrastive_weight * nce
   metrics = {'loss': jnp.mean(per_pair),
              'rotation_error_deg': jnp.mean(geometry.geodesic_angle_deg(r_gt, r_est)),

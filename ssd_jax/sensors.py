@@ -12,7 +12,9 @@ front-facing unit sees only a horizontal sector. The presets follow the data she
 
 `ssd_jax.synthetic.lidar` casts their rays into a simulated scene; `resample` keeps the
 points of a real cloud that one of their beams would have hit from a given standpoint,
-which is how the cross-sensor real pairs are made (`ssd_jax.data.rescan`).
+which is how the cross-sensor real pairs are made (`ssd_jax.data.rescan`); `cast` casts
+the unit's own rays at the surfaces a cloud samples, so its returns lie on the unit's
+rings about its own standpoint, not on the rings of the sensor that took the cloud.
 """
 
 from __future__ import annotations
@@ -100,3 +102,59 @@ def resample(points: np.ndarray, sensor: Sensor, width: float = 0.2) -> np.ndarr
   keep = ((nearest <= width) & in_field_of_view(points, sensor.horizontal_fov)
           & (np.linalg.norm(points, axis=1) <= sensor.max_range))
   return np.flatnonzero(keep)
+
+
+def cast(points: np.ndarray, sensor: Sensor, azimuth_step: float = 0.4,
+         max_gap: float = 2.0, depth_tolerance: float = 0.3) -> np.ndarray:
+  """What `sensor` at the origin returns from the surfaces that points [N, 3] sample
+  (metres, its frame: x forward, z up; those visible from the origin, as
+  `data.rescan.visible_from` keeps them): [M, 3] float64 metres, at most one point per ray.
+
+  The rays are the unit's beam elevations at every `azimuth_step` degrees inside its field
+  of view. The points are binned into columns of that width by azimuth; a ray meets the
+  surface between the column's nearest point above it and nearest point below it (by
+  elevation; at most `max_gap` degrees apart; ranges within `depth_tolerance` of each
+  other, relative, as a ground seen at a grazing angle changes range fast with
+  elevation): the point on the segment between the two at the ray's elevation, moved
+  onto the ray. A segment between two points of a plane lies on it, so a flat ground's
+  returns lie on it and on this unit's rings about its own standpoint, between the rings
+  of the unit that scanned it. `resample` cannot give that: the points it keeps are the
+  scan's, on the scanning unit's rings, which two views of one place would then share (a
+  pattern a descriptor can match instead of the place). A ray with no such pair (a gap
+  wider than `max_gap`, an edge between two depths, the sky) returns nothing.
+  """
+  points = np.asarray(points, np.float64)
+  horizontal = np.linalg.norm(points[:, :2], axis=1)
+  ranges = np.linalg.norm(points, axis=1)
+  keep = (ranges > 1e-6) & in_field_of_view(points, sensor.horizontal_fov)
+  points, horizontal, ranges = points[keep], horizontal[keep], ranges[keep]
+  width = min(sensor.horizontal_fov, 360.0)
+  columns = int(np.ceil(width / azimuth_step))
+  if len(points) == 0:
+    return np.zeros((0, 3))
+  # One sorted key per point: its column, then its elevation (degrees + 90 < 1000).
+  azimuth = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
+  column = np.clip(((azimuth + width / 2) // azimuth_step).astype(np.int64), 0, columns - 1)
+  elevation = np.degrees(np.arctan2(points[:, 2], horizontal))
+  key = column * 1000.0 + elevation + 90.0
+  order = np.argsort(key)
+  key, points, ranges, elevation = key[order], points[order], ranges[order], elevation[order]
+  beams = sensor.elevations()
+  ray_column = np.repeat(np.arange(columns), len(beams))
+  ray_elevation = np.tile(beams, columns)
+  above = np.searchsorted(key, ray_column * 1000.0 + ray_elevation + 90.0)
+  below = above - 1
+  a, b = np.minimum(above, len(key) - 1), np.maximum(below, 0)
+  ok = ((above < len(key)) & (below >= 0) & (key[a] // 1000 == ray_column)
+        & (key[b] // 1000 == ray_column) & (elevation[a] - elevation[b] <= max_gap)
+        & (np.abs(ranges[a] - ranges[b]) <= depth_tolerance * np.minimum(ranges[a], ranges[b])))
+  a, b, ray_column, ray_elevation = a[ok], b[ok], ray_column[ok], ray_elevation[ok]
+  share = ((ray_elevation - elevation[b]) / np.maximum(elevation[a] - elevation[b], 1e-9))
+  on_segment = points[b] + share[:, None] * (points[a] - points[b])
+  ray_azimuth = np.radians((ray_column + 0.5) * azimuth_step - width / 2)
+  ray_elevation = np.radians(ray_elevation)
+  rays = np.stack([np.cos(ray_elevation) * np.cos(ray_azimuth),
+                   np.cos(ray_elevation) * np.sin(ray_azimuth), np.sin(ray_elevation)], -1)
+  along = np.einsum('md,md->m', on_segment, rays)
+  keep = (along > 0) & (along <= sensor.max_range)
+  return rays[keep] * along[keep, None]

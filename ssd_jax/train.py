@@ -274,7 +274,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
     dataset = datasets.RescanPairDataset.from_source(
         d.path, rate=d.rescan_rate, sensors=tuple(d.rescan_sensors),
         min_shift=d.rescan_shift[0], max_shift=d.rescan_shift[1], views_per_cloud=d.rescan_views,
-        seed=config.seed, **data_kwargs)
+        beams=d.rescan_beams, seed=config.seed, **data_kwargs)
   else:
     dataset = datasets.CloudDataset.from_source(config.data.path, **data_kwargs)
   eval_points = None

@@ -3,7 +3,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ssd_jax import cf, geometry, objective
+from ssd_jax import cf, geometry, objective, train
 
 
 def _unit(x):
@@ -185,3 +185,31 @@ def test_jittered_partners_lie_within_the_jitter_of_the_exact_ones_and_are_seede
   assert (np.asarray(jittered(1)) != np.asarray(jittered(0))).mean() > 0.9
   with pytest.raises(ValueError, match='needs a PRNG key'):
     objective.partner_indices(centres, pc2, valid2, eye, jitter=1.5)
+
+
+def test_two_view_rows_keep_the_infonce_off_the_papers_pair(tiny_config):
+  tiny_config.model.partner_centers = True
+  rng = np.random.default_rng(3)
+  cloud = rng.uniform(-8, 8, (2, 512, 3)) * [1, 1, 0.25]
+  other = cloud + rng.normal(0, 0.05, cloud.shape)        # another view of the same place
+  state = train.create_train_state(tiny_config, jax.random.key(0))
+  variables = {'params': state.params, 'batch_stats': state.batch_stats}
+
+  def loss(second, weight, rows):
+    cfg = tiny_config.model.copy_and_resolve_references()
+    cfg.contrastive_weight, cfg.contrastive_rows = weight, rows
+    pts = jnp.asarray(np.stack([cloud, second], 1), jnp.float32)
+    return float(objective.self_supervised_loss(
+        train.create_model(tiny_config), variables, jax.random.key(1), pts,
+        jnp.ones(pts.shape[:3], bool), cfg)[0])
+
+  papers = cloud.copy()                                    # each row its own points again
+  rotation_only = loss(papers, 0.0, 'all')
+  assert loss(papers, 1.0, 'all') > rotation_only + 0.1
+  assert loss(papers, 1.0, 'two_view') == pytest.approx(rotation_only, abs=1e-6)
+  # One row of each: 'two_view' counts the InfoNCE of the other view's row only, as the
+  # mean over such rows; with a second view in every row it is 'all'.
+  mixed = np.stack([papers[0], other[1]])
+  assert loss(mixed, 1.0, 'two_view') != pytest.approx(loss(mixed, 1.0, 'all'), abs=1e-4)
+  assert loss(mixed, 1.0, 'two_view') > loss(mixed, 0.0, 'all') + 0.1
+  assert loss(other, 1.0, 'two_view') == pytest.approx(loss(other, 1.0, 'all'), abs=1e-6)

@@ -34,6 +34,7 @@ def test_config_errors_name_the_value(tiny_config):
            ('train.lr_schedule', 'step', "lr_schedule must be one of .*'step'"),
            ('model.contrastive_weight', -1.0, 'contrastive_weight must be >= 0, got -1.0'),
            ('model.contrastive_temperature', 0.0, 'contrastive_temperature must be > 0'),
+           ('model.contrastive_rows', 'paper', r"contrastive_rows must be one of \('all', 'two_view'\)"),
            ('model.partner_jitter', -1.0, 'partner_jitter must be a distance >= 0'),
            # tiny_config's partner_centers is off: a jitter would move nothing.
            ('model.partner_jitter', 1.0, 'partner_jitter moves partner centres: it needs')]
@@ -70,7 +71,8 @@ def test_rescan_pair_errors_name_the_value(tiny_config):
            ('rescan_sensors', ('vlp16', 'hdl128'), r"rescan_sensors: unknown \['hdl128'\]"),
            ('rescan_sensors', (), 'rescan_sensors: unknown'),
            ('rescan_shift', (10.0, 5.0), 'rescan_shift must be'),
-           ('rescan_views', 0, 'rescan_views must be >= 1')]
+           ('rescan_views', 0, 'rescan_views must be >= 1'),
+           ('rescan_beams', 'trace', r"rescan_beams must be one of \('select', 'cast'\)")]
   _each_data_value_fails(tiny_config, cases)
   tiny_config.objective = 'triplet'
   with pytest.raises(config_checks.ConfigError, match='for the self-supervised objective'):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import spatial
 
-from ssd_jax import geometry
+from ssd_jax import geometry, sensors
 from ssd_jax.data import datasets, io, registration_sets, rescan
 from ssd_jax.evaluation import registration
 from tests.conftest import shared_path
@@ -121,6 +121,24 @@ def test_rescan_view_is_another_unit_in_the_scans_own_frame():
   # structure is not kept (fewer points per ring, the scan's own rings elsewhere).
   own = np.median(spatial.cKDTree(points).query(points, k=2)[0][:, 1])
   assert np.median(spatial.cKDTree(view).query(view, k=2)[0][:, 1]) > own
+
+
+@pytest.mark.real_data
+def test_a_cast_rescan_lies_on_the_scans_surfaces_on_the_units_rings():
+  points = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin'))
+  cfg = rescan.RescanConfig(min_shift=5.0, max_shift=10.0, sensor='vlp16', min_points=500,
+                            toward_points=True, noise_sigma=0.0, voxel_size=0.01,
+                            beams='cast')
+  view, transform = rescan._virtual_scan(np.random.default_rng(0), points, 30.0, cfg)
+  # In the unit's frame its points lie on its 16 beams (0.01 m voxels move them little) ...
+  el = np.degrees(np.arctan2(view[:, 2], np.linalg.norm(view[:, :2], axis=1)))
+  off = np.min(np.abs(el[:, None] - sensors.get('vlp16').elevations()), axis=1)
+  assert len(view) >= 500 and np.median(off) < 0.05
+  # ... and, moved back, on the scan's surfaces.
+  back = view @ transform[:3, :3].T + transform[:3, 3]
+  assert np.median(spatial.cKDTree(points).query(back)[0]) < 0.15
+  with pytest.raises(ValueError, match=r"beams must be one of \('select', 'cast'\)"):
+    rescan.RescanConfig(beams='trace')
 
 
 @pytest.mark.real_data

@@ -56,3 +56,54 @@ def test_simulated_units_scan_their_rings_and_sector():
   assert len(pts) > 1000 and np.abs(az).max() <= 61
   with pytest.raises(ValueError, match='horizontal_fov must be in'):
     lidar.LidarModel(horizontal_fov=0.0)
+
+
+def _ground_rings(sensor_name: str, height: float, max_range: float = 40.0) -> np.ndarray:
+  """A flat ground at z = -height as `sensor_name` at the origin samples it: [N, 3]."""
+  sensor = sensors.get(sensor_name)
+  el = np.radians(sensor.elevations())
+  el = el[np.tan(-el) * max_range > height]   # the beams that meet the ground in range
+  az = np.radians(np.arange(-180, 180, 0.2))
+  r = height / np.tan(-el)[:, None]
+  return np.stack(np.broadcast_arrays(r * np.cos(az), r * np.sin(az),
+                                      np.full((len(el), 1), -height)), -1).reshape(-1, 3)
+
+
+def test_cast_puts_the_grounds_returns_on_the_new_units_rings():
+  # The ground as an HDL-64 at the origin samples it, seen by a VLP-16 8 m away: the
+  # returns lie on the ground and on the VLP-16's beams about its own standpoint.
+  ground = _ground_rings('hdl64', 1.73)
+  standpoint = np.array([8.0, 3.0, 0.0])
+  out = sensors.cast(ground - standpoint, sensors.get('vlp16'))
+  assert np.abs(out[:, 2] + 1.73).max() < 0.01     # on the ground: a segment of a plane
+  el = np.degrees(np.arctan2(out[:, 2], np.linalg.norm(out[:, :2], axis=1)))
+  assert np.min(np.abs(el[:, None] - sensors.get('vlp16').elevations()), axis=1).max() < 1e-6
+  # Most of the VLP-16's rings within the HDL-64's 40 m: one return per ray (0.4 degrees).
+  ideal = _ground_rings('vlp16', 1.73) + standpoint
+  assert len(out) > 0.7 * np.sum(np.linalg.norm(ideal[:, :2], axis=1) < 40) / 2
+  # Its returns lie between the HDL-64's rings as a VLP-16's would (within 5 cm of one of
+  # their radii about the HDL-64: 26 % of them; the VLP-16's true rings: 16 %), where every
+  # point resample keeps lies on one: it keeps the scan's points.
+  radii = np.unique(np.round(np.linalg.norm(ground[:, :2], axis=1), 6))
+  def on_old_rings(local):
+    r = np.linalg.norm((local + standpoint)[:, :2], axis=1)
+    return np.mean(np.min(np.abs(r[:, None] - radii[None]), axis=1) < 0.05)
+  kept = (ground - standpoint)[sensors.resample(ground - standpoint, sensors.get('vlp16'))]
+  assert on_old_rings(kept) == 1.0 and on_old_rings(out) < 0.4
+
+
+def test_cast_returns_the_front_surface_and_nothing_across_an_edge():
+  # A wall 10 m ahead (x = 10, |y| < 2, |z| < 0.5) in front of one at 20 m (|y| < 8,
+  # |z| < 1), both sampled every 5 cm, without the far wall's points the near one hides.
+  y, z = np.meshgrid(np.arange(-8, 8.01, 0.05), np.arange(-1, 1.01, 0.05))
+  back = np.c_[np.full(y.size, 20.0), y.ravel(), z.ravel()]
+  hidden = (np.abs(back[:, 1]) < 4) & (np.abs(back[:, 2]) <= 1)
+  front, back = back[hidden] * 0.5, back[~hidden]
+  out = sensors.cast(np.r_[front, back], sensors.get('vls128'))
+  near = np.abs(out[:, 0] - 10.0) < 0.05   # within a 0.4 degree column of the ray
+  far = np.abs(out[:, 0] - 20.0) < 0.05
+  assert near.sum() > 500 and far.sum() > 500 and np.all(near | far)   # no return between
+  az = np.degrees(np.arctan2(out[:, 1], out[:, 0]))
+  assert np.all(np.abs(az[near]) < 11.4) and not np.any(far & (np.abs(az) < 11.0)
+                                                        & (np.abs(out[:, 2]) < 0.9))
+  assert sensors.cast(np.zeros((0, 3)), sensors.get('vlp16')).shape == (0, 3)

@@ -127,7 +127,8 @@ class RescanPairDataset:
   def __init__(self, files: Sequence[os.PathLike], rate: float, sensors: Sequence[str],
                min_shift: float, max_shift: float, views_per_cloud: int = 8, seed: int = 0,
                fmt: str = 'auto', crop_radius: float = 20.0, min_points: int = 1,
-               cache_size: int = 4096):
+               cache_size: int = 4096, beams: str = 'select'):
+    self.beams = beams
     self.whole = CloudDataset(files, fmt=fmt, crop_radius=0.0, min_points=min_points)
     self.clouds = CloudDataset(files, fmt=fmt, crop_radius=crop_radius, min_points=min_points)
     self.rate, self.sensors, self.views_per_cloud = rate, tuple(sensors), views_per_cloud
@@ -145,7 +146,7 @@ class RescanPairDataset:
     rng = np.random.default_rng((self.seed, 7, i, k))
     cfg = rescan.RescanConfig(min_shift=self.shift[0], max_shift=self.shift[1],
                               sensor=str(rng.choice(self.sensors)), toward_points=True,
-                              min_points=RESCAN_MIN_POINTS, noise_sigma=0.0)
+                              min_points=RESCAN_MIN_POINTS, noise_sigma=0.0, beams=self.beams)
     try:
       view = crop(rescan.rescan_view(rng, self.whole.cloud(i), cfg), self.crop_radius)
     except ValueError:

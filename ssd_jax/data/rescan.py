@@ -31,6 +31,9 @@ from ssd_jax import geometry, sensors
 from ssd_jax.data import clean, groundtruth, io, preprocess, registration_sets
 
 
+BEAMS = ('select', 'cast')
+
+
 @dataclasses.dataclass(frozen=True)
 class RescanConfig:
   """Distances in metres, angles in degrees."""
@@ -46,6 +49,10 @@ class RescanConfig:
   # everything within max_range of its displaced centre, as a second submap of the place.
   occlusion: bool = True
   sensor: str = ''            # the virtual unit (ssd_jax.sensors); '' keeps every visible point
+  # How the unit's beams make its view (BEAMS): 'select' keeps the scan's points that lie on
+  # them (sensors.resample; the points stay on the scan's own rings), 'cast' casts its rays
+  # at the scan's surfaces (sensors.cast; the returns lie on the unit's rings).
+  beams: str = 'select'
   # True: the standpoint lies in the direction of a random point of the scan, not of a
   # uniform angle, so a scan that covers a sector only (KITTI's front-camera crops) is
   # re-scanned from over its own data when the standpoint is tens of metres away.
@@ -53,6 +60,10 @@ class RescanConfig:
   # Degrees (lo, hi): the virtual sensor is also tilted by an angle drawn from this range
   # about a random horizontal axis (a unit pitched or rolled: levelling's test sets).
   tilt: tuple[float, float] = (0.0, 0.0)
+
+  def __post_init__(self):
+    if self.beams not in BEAMS:
+      raise ValueError(f'beams must be one of {BEAMS}, got {self.beams!r}')
 
 
 def _voxel_grid(rng: np.random.Generator, points: np.ndarray, size: float) -> np.ndarray:
@@ -102,7 +113,9 @@ def _virtual_scan(rng: np.random.Generator, points: np.ndarray, yaw_deg: float,
       rot = rot @ np.asarray(geometry.quaternion_to_matrix(np.array(
           [np.cos(half), np.sin(half) * np.cos(axis), np.sin(half) * np.sin(axis), 0.0])))
     local = (seen - shift) @ rot   # row form of R^T (p - c)
-    if cfg.sensor:
+    if cfg.sensor and cfg.beams == 'cast':
+      local = sensors.cast(local, sensors.get(cfg.sensor))
+    elif cfg.sensor:
       local = local[sensors.resample(local, sensors.get(cfg.sensor))]
     cloud2 = _view(rng, local, cfg)
     if len(cloud2) >= cfg.min_points:
