@@ -145,11 +145,13 @@ def self_supervised_loss(model: nn.Module, variables: dict[str, Any], key: jax.A
     nce = jax.vmap(functools.partial(correspondence_nce, radius=cfg.contrastive_radius,
                                      temperature=cfg.contrastive_temperature))(
         centers[:b], back, desc[:b], desc[b:], mask[:b], mask[b:])
-    if cfg.contrastive_rows == 'two_view' and points.ndim == 4:
-      # A row whose second view is its own points (the paper's pair) shares the scan's
-      # rings in both branches, which the InfoNCE would reward matching; only rows with
-      # another view of the place count, averaged over those rows.
-      two_view = jnp.any(points[:, 0] != points[:, 1], axis=(1, 2))
+    if cfg.contrastive_rows == 'two_view':
+      # A row whose second view is its own points (the paper's pair; every row of a batch
+      # of single clouds) shares the scan's rings in both branches, which the InfoNCE
+      # would reward matching; only rows with another view of the place count, averaged
+      # over those rows.
+      two_view = (jnp.any(points[:, 0] != points[:, 1], axis=(1, 2)) if points.ndim == 4
+                  else jnp.zeros(b, bool))
       nce = jnp.where(two_view, nce, 0.0) * b / jnp.maximum(jnp.sum(two_view), 1)
     per_pair = per_pair + cfg.contrastive_weight * nce
   metrics = {'loss': jnp.mean(per_pair),

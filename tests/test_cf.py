@@ -213,3 +213,14 @@ def test_two_view_rows_keep_the_infonce_off_the_papers_pair(tiny_config):
   assert loss(mixed, 1.0, 'two_view') != pytest.approx(loss(mixed, 1.0, 'all'), abs=1e-4)
   assert loss(mixed, 1.0, 'two_view') > loss(mixed, 0.0, 'all') + 0.1
   assert loss(other, 1.0, 'two_view') == pytest.approx(loss(other, 1.0, 'all'), abs=1e-6)
+  # A batch of single clouds (no second view at all) is the paper's pair in every row.
+  cfg = tiny_config.model.copy_and_resolve_references()
+  cfg.contrastive_weight, cfg.contrastive_rows = 1.0, 'two_view'
+  single = objective.self_supervised_loss(
+      train.create_model(tiny_config), variables, jax.random.key(1),
+      jnp.asarray(cloud, jnp.float32), jnp.ones(cloud.shape[:2], bool), cfg)[0]
+  cfg.contrastive_weight = 0.0
+  alone = objective.self_supervised_loss(
+      train.create_model(tiny_config), variables, jax.random.key(1),
+      jnp.asarray(cloud, jnp.float32), jnp.ones(cloud.shape[:2], bool), cfg)[0]
+  assert float(single) == pytest.approx(float(alone), abs=1e-6)

@@ -139,6 +139,8 @@ def test_a_cast_rescan_lies_on_the_scans_surfaces_on_the_units_rings():
   assert np.median(spatial.cKDTree(points).query(back)[0]) < 0.15
   with pytest.raises(ValueError, match=r"beams must be one of \('select', 'cast'\)"):
     rescan.RescanConfig(beams='trace')
+  with pytest.raises(ValueError, match='name the unit'):
+    rescan.RescanConfig(beams='cast')
 
 
 @pytest.mark.real_data

@@ -64,6 +64,8 @@ class RescanConfig:
   def __post_init__(self):
     if self.beams not in BEAMS:
       raise ValueError(f'beams must be one of {BEAMS}, got {self.beams!r}')
+    if self.beams == 'cast' and not self.sensor:
+      raise ValueError("beams='cast' casts a unit's rays: name the unit (sensor)")
 
 
 def _voxel_grid(rng: np.random.Generator, points: np.ndarray, size: float) -> np.ndarray:
