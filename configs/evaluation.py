@@ -21,6 +21,7 @@ def get_config() -> ml_collections.ConfigDict:
       'feat3dnet': 'feat3dnet',
       'ours_detector': 'ours_detector',     # self-supervised detector (extension)
       'ours_rescan': 'ours_rescan',         # ours matching across sensors (configs/ours_rescan.py)
+      'ours_mined': 'ours_mined',           # ours trained on mined pairs (configs/ours_mined.py)
   })
   # keypoints+descriptor: keypoints iss | random | a checkpoint name (its detector);
   # descriptors fpfh | a checkpoint name. The paper's Tables I/II and Fig. 4 rows:

@@ -34,6 +34,8 @@ SHIPPED = {
     'ours_detector': 'self-supervised descriptor and detector (configs/ours_detector.py)',
     'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/feat3dnet.py)',
     'ours_rescan': 'ours fine-tuned to match across sensors and standpoints (configs/ours_rescan.py)',
+    'ours_mined': 'ours fine-tuned on pairs mined from a mixed-sensor drive '
+                  '(configs/ours_mined.py)',
 }
 CONFIG_FILE, WEIGHTS_FILE, CARD_FILE = 'config.json', 'weights.msgpack', 'MODEL_CARD.md'
 

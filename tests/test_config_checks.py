@@ -146,4 +146,4 @@ def test_every_training_config_of_the_project_passes_its_checks():
       config_checks.check_config(config, num_devices=1)
       names.append(path.stem)
   assert {'paper', 'paper_small', 'ours', 'ours_detector', 'feat3dnet_small_varied',
-          'feat3dnet', 'adapt', 'rescan'} <= set(names)
+          'feat3dnet', 'adapt', 'rescan', 'ours_rescan', 'ours_mined'} <= set(names)

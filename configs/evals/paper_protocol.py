@@ -11,7 +11,8 @@ Command (after the main job's synthetic set, `experiments.make_synthetic
 Each row is ISS + one descriptor: FPFH (1 m normals, 4 m features), `ours`, the
 3DFeat-Net baseline `feat3dnet` (configs/feat3dnet.py: `ours`' network trained
 with 3DFeat-Net's triplet loss), `ours_rescan` (configs/ours_rescan.py; 100 / 100 / 100 /
-97.5 % on KITTI-style, any yaw, push-broom and real re-scans) and `ours_detector`'s
+97.5 % on KITTI-style, any yaw, push-broom and real re-scans), `ours_mined`
+(configs/ours_mined.py; 100 / 100 / 100 / 97.5 %) and `ours_detector`'s
 descriptor. The tables give
 success, RTE, RRE and RANSAC iterations per set, and success per 45-degree bin of the
 pairs' relative yaw; the precision at 1 m of each row is in the Fig. 4 sections.
@@ -27,7 +28,8 @@ REAL = 'data_cache/real_pairs'
 
 def get_config():
   config = evaluation.get_config()
-  config.rows = ('iss+fpfh', 'iss+ours', 'iss+ours_rescan', 'iss+feat3dnet', 'iss+ours_detector')
+  config.rows = ('iss+fpfh', 'iss+ours', 'iss+ours_rescan', 'iss+ours_mined', 'iss+feat3dnet',
+                 'iss+ours_detector')
   config.evals.kitti = evaluation.registration(KITTI, title='KITTI-style synthetic')
   config.evals.kitti_yaw = evaluation.registration(
       KITTI_YAW, title='KITTI-style synthetic, each scan turned by a random yaw')

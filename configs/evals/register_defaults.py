@@ -1,7 +1,8 @@
 """The register command's defaults (farthest-point keypoints, 512 then 1,024 where those
 leave the pose in doubt, upright RANSAC, its 10 best poses and the bird's-eye-view
 search's 5 verified against the clouds) with FPFH and the
-shipped `ours` and `ours_rescan`, on the README's 64-beam sets: the README's "defaults" rows.
+shipped `ours`, `ours_rescan` and `ours_mined`, on the README's 64-beam sets: the README's
+"defaults" rows.
 
 Command (after the main job's synthetic set and `experiments.make_real_pairs`; 12 min on
 the 2-core AMD EPYC VM with two other evaluations sharing it, FPFH most of it):
@@ -10,9 +11,9 @@ the 2-core AMD EPYC VM with two other evaluations sharing it, FPFH most of it):
         --workdir=runs/register_defaults
 
 Expected (2-core CPU VM): 100 % on all three sets (KITTI-style 106, push-broom 53, real
-re-scans 80) for ours, ours_rescan and FPFH, RTE 0.008 / 0.036 / 0.006 m, every pair ended at the
-coarse level, no pose refused as degenerate. RANSAC's best pose alone,
-without the verification (`--config.rows="('auto+ours+upright','auto+fpfh+upright')"`):
+re-scans 80) for ours, ours_rescan, ours_mined and FPFH, RTE 0.008 / 0.036 / 0.006 m,
+every pair ended at the coarse level, no pose refused as degenerate. RANSAC's best pose
+alone, without the verification (`--config.rows="('auto+ours+upright','auto+fpfh+upright')"`):
 ours 100 / 100 / 100 %, FPFH 99.1 / 100 / 100 %, RTE 0.07-0.17 m. docs/notes/cross_sensor.md has
 the sets where the defaults matter.
 """
@@ -23,7 +24,7 @@ from ssd_jax.configs import evaluation
 def get_config():
   config = evaluation.get_config()
   config.rows = ('auto+ours+upright+verify+bev', 'auto+ours_rescan+upright+verify+bev',
-                 'auto+fpfh+upright+verify+bev')
+                 'auto+ours_mined+upright+verify+bev', 'auto+fpfh+upright+verify+bev')
   config.evals.kitti = evaluation.registration('data_cache/synthetic_small/test_kitti',
                                                title='KITTI-style synthetic')
   config.evals.oxford = evaluation.registration('data_cache/synthetic_small/test_oxford',

@@ -30,7 +30,8 @@ BUILTIN_DESCRIPTORS = ('fpfh',)
 NAMES = {'iss': 'ISS', 'random': 'random', 'auto': 'farthest-point', 'fpfh': 'FPFH',
          'ours': 'Ours',
          'feat3dnet': '3DFeat-Net', 'ours_detector': 'Ours (self-sup. detector)',
-         'ours_run': 'Ours (this run)', 'ours_rescan': 'Ours (re-scan views)'}
+         'ours_run': 'Ours (this run)', 'ours_rescan': 'Ours (re-scan views)',
+         'ours_mined': 'Ours (mined pairs)'}
 # What a keypoint row named after a checkpoint detects with: that network's attention,
 # highest first after 0.5 m non-maximum suppression (`keypoints.detect`).
 _UNTRAINED_ATTENTION = "an attention the paper's CF loss never trains (it gets no gradient)"
