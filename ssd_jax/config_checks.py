@@ -5,7 +5,6 @@ failure is a `ConfigError` whose message names the field and the value."""
 from __future__ import annotations
 
 import json
-import os
 
 import jax
 import ml_collections
@@ -84,8 +83,6 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
             f'data.rescan_rate is for the self-supervised objective, not {config.objective!r}')
   if d.get('pairs'):
     require(0 < d.pairs_rate <= 1, f'data.pairs_rate must be in (0, 1], got {d.pairs_rate}')
-    require(os.path.isfile(d.pairs), f'data.pairs: no such file {d.pairs!r} (experiments.mine '
-            'writes it)')
     require(d.rescan_rate == 0, 'data.pairs and data.rescan_rate are two different second '
             'views: set one of them')
     require(config.objective == 'self_supervised',

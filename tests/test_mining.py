@@ -149,5 +149,5 @@ def test_a_file_that_is_not_mined_pairs_is_one_line(tmp_path):
   bad.write_text('a,b\n')
   with pytest.raises(errors.UserError, match='not a file of mined pairs'):
     mined_pairs.read_kept(str(bad))
-  with pytest.raises(errors.UserError, match='No such file'):
+  with pytest.raises(errors.UserError, match='none.csv: no such file of mined pairs'):
     mined_pairs.read_kept(str(tmp_path / 'none.csv'))

@@ -81,6 +81,9 @@ def read_kept(path: str) -> list[MinedPair]:
   try:
     with open(path, newline='') as f:
       rows = list(csv.reader(f))
+  except FileNotFoundError:
+    raise errors.UserError(f'{path}: no such file of mined pairs (experiments.mine writes '
+                           'it)') from None
   except OSError as e:
     raise errors.UserError(f'{path}: {e.strerror}') from None
   if not rows or rows[0] != HEADER:
