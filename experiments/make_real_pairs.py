@@ -52,10 +52,7 @@ flags.DEFINE_list('tilt', ['0', '0'], 'Degrees lo,hi: tilt the second view\'s se
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
-  sources = [p for pattern in FLAGS.sources for p in sorted(Path(FLAGS.real).glob(pattern))]
-  if not sources:
-    raise SystemExit(f'error: {FLAGS.real}: no scans match {",".join(FLAGS.sources)} '
-                     '(set --real or SSD_JAX_SHARED_DATA)')
+  # The flags before the data: a wrong value is named whether or not the scans are there.
   if FLAGS.max_range <= 0:
     raise SystemExit(f'error: --max_range must be > 0, got {FLAGS.max_range}')
   if not 0 <= FLAGS.min_shift <= FLAGS.max_shift:
@@ -73,6 +70,10 @@ def main(argv):
   if len(tilt) != 2 or not 0 <= tilt[0] <= tilt[1] <= 90:
     raise SystemExit(f'error: --tilt must be lo,hi degrees with 0 <= lo <= hi <= 90, got '
                      f'{",".join(FLAGS.tilt)}')
+  sources = [p for pattern in FLAGS.sources for p in sorted(Path(FLAGS.real).glob(pattern))]
+  if not sources:
+    raise SystemExit(f'error: {FLAGS.real}: no scans match {",".join(FLAGS.sources)} '
+                     '(set --real or SSD_JAX_SHARED_DATA)')
   cfg = rescan.RescanConfig(max_range=FLAGS.max_range, occlusion=not FLAGS.submaps,
                             sensor=FLAGS.sensor, min_shift=FLAGS.min_shift,
                             max_shift=FLAGS.max_shift, tilt=tilt)

@@ -9,6 +9,11 @@ front-facing unit sees only a horizontal sector. The presets follow the data she
     hdl64    Velodyne HDL-64E (KITTI)     64  +2 ... -24.33, 1/3 and 1/2 0.17          360
     vls128   Velodyne VLS-128 / OS-128   128  +15 ... -25, ~0.31         0.2           360
     front120 Hesai AT128-like (solid)    128  +12.9 ... -12.5, 0.2       0.1           120 (x fwd)
+    os0_64   Ouster OS0-64 (wide field)    64  +45 ... -45, ~1.43         0.35          360
+
+`os0_64` is the unit no shipped model trained on (the adaptation's measurement,
+`configs/data/os0_pairs.py`): a short-range (50 m) robot sensor whose half of the beams
+look up and whose ground rings end ~35 m out.
 
 `ssd_jax.synthetic.lidar` casts their rays into a simulated scene; `resample` keeps the
 points of a real cloud that one of their beams would have hit from a given standpoint,
@@ -65,6 +70,8 @@ SENSORS = {s.name: s for s in (
            max_range=100.0),
     Sensor('front120', 'Hesai AT128-like solid state, 120 deg forward',
            ((128, 12.9, -12.5),), 0.1, horizontal_fov=120.0, max_range=80.0),
+    Sensor('os0_64', 'Ouster OS0-64, 90 deg vertical field', ((64, 45.0, -45.0),), 0.35,
+           max_range=50.0),
 )}
 
 

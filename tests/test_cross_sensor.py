@@ -150,7 +150,8 @@ def test_make_real_pairs_names_a_bad_unit(tmp_path):
                         f'--out={tmp_path}'], cwd=ROOT, capture_output=True, text=True,
                        timeout=120)
   assert run.returncode == 1 and run.stderr.strip().splitlines()[-1] == (
-      "error: --sensor: unknown sensor 'vlp32'; known: vlp16, hdl32, hdl64, vls128, front120")
+      "error: --sensor: unknown sensor 'vlp32'; known: vlp16, hdl32, hdl64, vls128, front120, "
+      "os0_64")
 
 
 def test_row_names_parse_into_keypoints_descriptor_estimator_and_verification():

@@ -15,6 +15,9 @@ def test_presets_have_their_data_sheet_patterns():
   assert len(hdl32) == 32 and abs(np.diff(hdl32).mean() + 1.333) < 0.01
   assert sensors.get('hdl64').num_beams == 64 and sensors.get('vls128').num_beams == 128
   assert sensors.get('front120').horizontal_fov == 120
+  os0 = sensors.get('os0_64')
+  assert os0.num_beams == 64 and os0.elevations().max() == 45 and os0.elevations().min() == -45
+  assert os0.max_range == 50
   with pytest.raises(ValueError, match="unknown sensor 'vlp32'; known: vlp16"):
     sensors.get('vlp32')
 

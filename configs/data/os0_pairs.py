@@ -1,0 +1,24 @@
+"""An OS0-64 against OS0-64 test set: a unit no shipped model trained on (`ours`,
+`ours_rescan` and `ours_mined` saw the other five of `ssd_jax/sensors.py`), in scenes the
+adaptation scans do not show (`experiments.adapt`'s measurement, `configs/evals/adaptation.py`).
+
+Command (~1 minute):
+
+    python -m experiments.make_cross_sensor --config=configs/data/os0_pairs.py \
+        --out=data_cache/os0_pairs
+
+96 pairs (4 scenes x 4 distance bins x 6 pairs), both clouds from the wide-field 64-beam
+unit 5-40 m apart at any yaw; no real re-scans.
+"""
+
+from ssd_jax.configs.data import cross_sensor as cross_sensor_data
+
+
+def get_config():
+  config = cross_sensor_data.get_config()
+  config.cross_sensor.reference = 'os0_64'
+  config.cross_sensor.sensors = ('os0_64',)
+  config.cross_sensor.pairs_per_cell = 6
+  config.cross_sensor.num_scenes = 4
+  config.real.sources = ()
+  return config
