@@ -1,6 +1,7 @@
-"""An OS0-64 against OS0-64 test set: a unit no shipped model trained on (`ours`,
-`ours_rescan` and `ours_mined` saw the other five of `ssd_jax/sensors.py`), in scenes the
-adaptation scans do not show (`experiments.adapt`'s measurement, `configs/evals/adaptation.py`).
+"""An OS0-64 against OS0-64 test set: a unit in no shipped model's training data (`ours`
+trained on 64-beam scans, `ours_rescan` and `ours_mined` on the other five units of
+`ssd_jax/sensors.py`), in scenes the adaptation scans do not show (`experiments.adapt`'s
+measurement, `configs/evals/adaptation_os0.py`).
 
 Command (~1 minute):
 

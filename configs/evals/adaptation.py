@@ -1,4 +1,4 @@
-"""Label-free adaptation to a sensor the shipped model never saw, measured: VLP-16 pairs of
+"""Label-free adaptation to a sensor `ours` never saw, measured: VLP-16 pairs of
 scenes the adaptation scans do not show, before (`ours`) and after: `adapted` (the adapt
 command's default: pairs mined from the drive, two-view training with the InfoNCE at
 partner centres), `adapted_single` (`--pairs=none`: the scans alone, the same losses) and
@@ -27,7 +27,7 @@ farthest-point keypoints with upright RANSAC (the descriptor alone: RANSAC's bes
 the bird's-eye-view search alone, and the register command's defaults, for each model's
 descriptor. Expected, the descriptor alone with `--config.sampling=uniform`: `ours` 38.5 %, adapted 49.0 / 47.9 % (seeds
 0 / 1), adapted_single 46.9 %, adapted_plain 46.9 / 44.8 %; docs/notes/cross_sensor.md
-has the table.
+has the table. `adaptation_os0.py` measures it on a unit no shipped model saw.
 """
 
 from ssd_jax.configs.evals import cross_sensor
