@@ -12,7 +12,7 @@ front-facing unit sees only a horizontal sector. The presets follow the data she
     os0_64   Ouster OS0-64 (wide field)    64  +45 ... -45, ~1.43         0.35          360
 
 `os0_64` is the unit no shipped model trained on (the adaptation's measurement,
-`configs/data/os0_pairs.py`): a short-range (50 m) robot sensor whose half of the beams
+`configs/data/os0_pairs.py`): a short-range (50 m) robot sensor, half of whose beams
 look up and whose ground rings end ~35 m out.
 
 `ssd_jax.synthetic.lidar` casts their rays into a simulated scene; `resample` keeps the
