@@ -38,3 +38,15 @@ def get_config():
   real.pairs_per_cell = 1            # per scan, sensor and distance bin
   real.max_range = 40.0              # both views keep what lies within this of their sensor
   return config
+
+
+def one_unit(unit: str) -> ml_collections.ConfigDict:
+  """A set of one unit's pairs (both clouds from `unit`, ssd_jax/sensors.py): 96 pairs,
+  4 scenes x 4 distance bins x 6 pairs, no real re-scans (the adaptation's measurement)."""
+  config = get_config()
+  config.cross_sensor.reference = unit
+  config.cross_sensor.sensors = (unit,)
+  config.cross_sensor.pairs_per_cell = 6
+  config.cross_sensor.num_scenes = 4
+  config.real.sources = ()
+  return config

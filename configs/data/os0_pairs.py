@@ -16,10 +16,4 @@ from ssd_jax.configs.data import cross_sensor as cross_sensor_data
 
 
 def get_config():
-  config = cross_sensor_data.get_config()
-  config.cross_sensor.reference = 'os0_64'
-  config.cross_sensor.sensors = ('os0_64',)
-  config.cross_sensor.pairs_per_cell = 6
-  config.cross_sensor.num_scenes = 4
-  config.real.sources = ()
-  return config
+  return cross_sensor_data.one_unit('os0_64')
