@@ -116,6 +116,10 @@ def get_config() -> ml_collections.ConfigDict:
   # Metres: the voxel grid of the training clouds, on which registration puts every cloud
   # first (registration.pipeline.to_grid).
   inference.voxel_size = 0.2
+  # What registration's default ('auto') farthest-point keypoints are sampled from: 'all'
+  # the cloud's points; 'structure', those above its ground (experiments.adapt picks it
+  # for a sensor whose mined pairs it registers better).
+  inference.keypoints = 'all'
 
   config.train = train = ml_collections.ConfigDict()
   train.batch_size = 6

@@ -2,7 +2,8 @@ r"""Adapt a trained descriptor to your own sensor without labels: mine pairs of 
 fine-tune on them, then export the model with a model card.
 
     python -m experiments.adapt --scans=/data/my_drive --out=exports/my_sensor \
-        [--pairs=auto|none|MINED.csv] [--init=ours] [--steps=1500] [--config=configs/adapt.py]
+        [--pairs=auto|none|MINED.csv] [--keypoints=auto|all|structure] [--init=ours] \
+        [--steps=1500] [--config=configs/adapt.py]
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin --descriptor=learned \
         --checkpoint=exports/my_sensor
 
@@ -13,9 +14,13 @@ pose is read) into OUT/mined_pairs.csv, then trains the paper's objective with h
 each batch's second branches a real second scan moved by the mined transform (two-view
 training, `datasets.MinedPairDataset`) and half the paper's turned copy. Where no pair
 passes (scans not in capture order), and with `--pairs=none`, it trains the paper's
-single-scan objective alone. OUT/run holds the training run (rerun the command to
+single-scan objective alone. Last, with `--keypoints=auto`, the adapted model's
+descriptor alone registers 32 pairs farther apart than the miner reached (each two kept
+pairs chained) twice, its keypoints sampled from all points and from the structure above
+the ground, and the export keeps the domain that registers more (`registration.keypoint_choice`; 'structure' where the sensor's
+ground rings mislead its matches). OUT/run holds the training run (rerun the command to
 resume it, mining too); OUT holds the exported model (config.json, weights.msgpack) and
-MODEL_CARD.md (base model, scans, pairs, steps, wall time, machine, command).
+MODEL_CARD.md (base model, scans, pairs, steps, keypoints, wall time, machine, command).
 docs/notes/benchmarks.md times it on 2 CPU cores.
 """
 
@@ -33,7 +38,7 @@ from tqdm import auto as tqdm
 from ssd_jax import cli, pretrained, train
 from ssd_jax.data import clean, io, mined_pairs
 from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.registration import mining
+from ssd_jax.registration import keypoint_choice, mining
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('scans', None, 'Folder (or index .txt) of unlabeled scans of the sensor.')
@@ -42,6 +47,11 @@ flags.DEFINE_string('init', 'ours', 'Model to start from: a shipped name, export
 flags.DEFINE_integer('steps', None, 'Training steps (default: the config\'s).')
 flags.DEFINE_string('pairs', 'auto', 'auto: mine pairs of the scans first (OUT/mined_pairs.csv); '
                     "none: the paper's single-scan objective alone; or a miner's CSV.")
+flags.DEFINE_enum('keypoints', 'auto', ('auto', 'all', 'structure'),
+                  "auto: sample the exported model's keypoints from the domain that registers "
+                  "more of the chained mined pairs past the miner's gaps "
+                  "(registration.keypoint_choice); or that domain ('all' points, or the "
+                  "'structure' above the ground).")
 cli.define_config_file('config', 'configs/adapt.py', 'Adaptation config.')
 flags.mark_flags_as_required(['scans', 'out'])
 
@@ -56,6 +66,7 @@ Fine-tuned without labels from `{init}`, every weight, on {num_scans} unlabeled 
 | scans | `{scans}` ({num_scans} files) |
 | mined pairs | {pairs} |
 | config | `configs/adapt.py` ({steps} steps, learning rate {lr:g}, {schedule}) |
+| keypoints | {keypoints} |
 | wall time | {minutes:.1f} minutes |
 | machine | {machine} |
 | written | {date} |
@@ -99,6 +110,24 @@ def _pairs(scans: list[str]) -> tuple[str, str]:
   return path, f'{len(kept)} (`{path}`)'
 
 
+def _keypoints(run_dir: str, pairs_csv: str) -> tuple[str, str]:
+  """The exported model's keypoint domain (`inference.KEYPOINT_SELECTIONS`) and the model
+  card's line about it: `--keypoints`, or with 'auto' the one that registers more of the
+  chained mined pairs beyond the miner's gaps ('all' without them)."""
+  if FLAGS.keypoints != 'auto':
+    return FLAGS.keypoints, f"'{FLAGS.keypoints}' points (`--keypoints`)"
+  if not pairs_csv:
+    return 'all', "'all' points (no mined pairs to choose on)"
+  print('choosing where to sample keypoints, on mined pairs farther apart than the miner '
+        'reached ...')
+  choice = keypoint_choice.choose(pretrained.load(run_dir), mined_pairs.read_kept(pairs_csv),
+                                  functools.partial(clean.read_metres, fmt='auto'))
+  if choice is None:
+    return 'all', "'all' points (no chain of mined pairs to choose on)"
+  print(choice.line())
+  return choice.keypoints, choice.line()
+
+
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
@@ -116,18 +145,19 @@ def main(argv):
     objective = (PAIRS_OBJECTIVE.format(rate=config.data.pairs_rate) if config.data.pairs
                  else SINGLE_OBJECTIVE)
     train.train_and_evaluate(config, run_dir)
+    keypoints, keypoints_line = _keypoints(run_dir, config.data.pairs)
     minutes = (time.perf_counter() - start) / 60
     card = CARD.format(
         name=os.path.basename(os.path.normpath(FLAGS.out)), init=FLAGS.init, scans=FLAGS.scans,
         num_scans=num_scans, objective=objective, pairs=pairs_line,
         steps=config.train.num_steps, lr=config.train.learning_rate,
-        schedule=config.train.lr_schedule, minutes=minutes,
+        schedule=config.train.lr_schedule, keypoints=keypoints_line, minutes=minutes,
         machine=', '.join(filter(None, (platform.machine(), platform.processor(),
                                         f'{os.cpu_count()} cores', platform.system()))),
         date=datetime.date.today().isoformat(), command=' '.join(['python -m experiments.adapt']
                                                                   + sys.argv[1:]),
         out=FLAGS.out)
-    model = pretrained.export_run(run_dir, FLAGS.out, card=card)
+    model = pretrained.export_run(run_dir, FLAGS.out, card=card, keypoints=keypoints)
   except io.CloudFileError as e:
     raise SystemExit(f'error: --scans: {e}') from None
   print(f'wrote {FLAGS.out}: {FLAGS.init} adapted on {num_scans} scans of {FLAGS.scans} '

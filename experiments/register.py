@@ -36,7 +36,9 @@ flags.DEFINE_string('cloud2', None, 'Source cloud, mapped into cloud 1 by T_12.'
 flags.DEFINE_enum('format', 'auto', ['auto', *io.BIN_FORMATS],
                   '.bin layout (float32 rows; *64: float64 rows); auto refuses to guess.')
 flags.DEFINE_enum('keypoints', DEFAULTS.keypoints, pipeline.KEYPOINTS, 'auto: 1,024 farthest-'
-                  "point keypoints; iss: the paper's; learned: a detector model's.")
+                  "point keypoints (of the points above the ground for a model whose config "
+                  "says inference.keypoints='structure', as experiments.adapt may set); iss: "
+                  "the paper's; learned: a detector model's.")
 flags.DEFINE_enum('ransac', DEFAULTS.estimator, pipeline.ESTIMATORS,
                   'upright: 2-point samples of a turn about z and a shift (z up); rigid: '
                   "3-point samples, any rotation (the paper's).")

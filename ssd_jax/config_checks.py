@@ -9,7 +9,8 @@ import json
 import jax
 import ml_collections
 
-from ssd_jax import augment, config_upgrade, errors, grouping, network, objective, sensors
+from ssd_jax import (augment, config_upgrade, errors, grouping, inference, network, objective,
+                     sensors)
 from ssd_jax.data import datasets, rescan
 
 AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
@@ -116,6 +117,9 @@ def check_config(config: ml_collections.ConfigDict, num_devices: int | None = No
           f'inference.draws must be >= 1, got {config.inference.draws}')
   require(config.inference.voxel_size >= 0,
           f'inference.voxel_size must be >= 0 metres, got {config.inference.voxel_size}')
+  require(config.inference.keypoints in inference.KEYPOINT_SELECTIONS,
+          f'inference.keypoints must be one of {inference.KEYPOINT_SELECTIONS}, got '
+          f'{config.inference.keypoints!r}')
   require(t.batch_size >= 1, f'train.batch_size must be >= 1, got {t.batch_size}')
   require(t.learning_rate > 0, f'train.learning_rate must be > 0, got {t.learning_rate}')
   require(t.lr_schedule in LR_SCHEDULES,

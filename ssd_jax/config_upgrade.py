@@ -47,6 +47,7 @@ RUN_KEYS = {
     ('inference', 'num_samples'): 0,
     ('inference', 'draws'): 1,
     ('inference', 'voxel_size'): 0.2,
+    ('inference', 'keypoints'): 'all',
 }
 
 # (split, key) -> the value of synthetic datasets written before the key existed.

@@ -39,6 +39,10 @@ from ssd_jax import config_upgrade, errors, grouping, network, padding
 from ssd_jax.data.clean import check_cloud
 
 SEARCHES = ('kdtree', 'dense')
+# Where registration's default keypoints are sampled with a model (its config's
+# `inference.keypoints`, `registration.pipeline.keypoint_domain`): the whole cloud, or the
+# points above its ground.
+KEYPOINT_SELECTIONS = ('all', 'structure')
 DENSE_CHUNK = 512   # centers per dense ball query ([DENSE_CHUNK, N] distances)
 
 
@@ -58,6 +62,9 @@ class Model:
       sampling noise that averaging removes, at `draws` times the network cost.
     voxel_size: the voxel grid (metres) of its training clouds, on which
       `registration.pipeline` puts every cloud before describing it.
+    keypoints: `KEYPOINT_SELECTIONS`, what registration's 'auto' keypoints are sampled
+      from: 'all' (the whole cloud) or 'structure' (the points above its ground; `experiments.adapt` picks it for a sensor where it
+      registers more of the mined pairs).
   """
   net: network.FeatureNet
   variables: Any
@@ -66,15 +73,20 @@ class Model:
   step: int | None = None     # training step of a loaded checkpoint
   draws: int = 1
   voxel_size: float = 0.2     # metres: the grid of the clouds it was trained on
+  keypoints: str = 'all'
 
   @classmethod
   def from_config(cls, config: ml_collections.ConfigDict, variables) -> 'Model':
     """The network of `config.model` with `variables`, describing as `config.inference`
     says (a stored config: after `config_upgrade.upgrade`)."""
     settings = config.inference
+    if settings.keypoints not in KEYPOINT_SELECTIONS:
+      raise errors.UserError(f'inference.keypoints must be one of {KEYPOINT_SELECTIONS}, got '
+                             f'{settings.keypoints!r}')
     num_samples = int(settings.num_samples) or int(config.model.num_samples)
     return cls(network.create(config.model), variables, float(config.model.radius),
-               num_samples, draws=int(settings.draws), voxel_size=float(settings.voxel_size))
+               num_samples, draws=int(settings.draws), voxel_size=float(settings.voxel_size),
+               keypoints=str(settings.keypoints))
 
 
 def checkpoint_directory(run_dir: str | os.PathLike) -> str:

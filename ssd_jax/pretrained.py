@@ -80,10 +80,12 @@ def load_export(path: str | os.PathLike) -> inference.Model:
 
 
 def export_run(run: str | os.PathLike, out: str | os.PathLike, step: int | None = None,
-               num_samples: int = 0, draws: int = 0, card: str = '') -> inference.Model:
+               num_samples: int = 0, draws: int = 0, card: str = '',
+               keypoints: str = '') -> inference.Model:
   """Export checkpoint `step` (default: the latest) of training run `run` to folder `out`,
-  optionally describing with `num_samples` points x `draws` samplings of each ball (0:
-  the run's own setting), and check that it loads back. -> the exported model."""
+  optionally describing with `num_samples` points x `draws` samplings of each ball and
+  'auto' keypoints from the `keypoints` domain (0 / '': the run's own setting), and check
+  that it loads back. -> the exported model."""
   # Orbax only here and in training: loading a shipped or exported model never imports it.
   from ssd_jax import checkpoint  # pylint: disable=g-import-not-at-top
   model = inference.load(run, step)
@@ -92,6 +94,7 @@ def export_run(run: str | os.PathLike, out: str | os.PathLike, step: int | None 
   ckpt.close()
   config.inference.num_samples = num_samples or config.inference.num_samples
   config.inference.draws = draws or config.inference.draws
+  config.inference.keypoints = keypoints or config.inference.keypoints
   model = dataclasses.replace(inference.Model.from_config(config, model.variables),
                               step=model.step)
   load_export(export(model, config, out, card))   # what was written loads back

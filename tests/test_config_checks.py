@@ -37,7 +37,9 @@ def test_config_errors_name_the_value(tiny_config):
            ('model.contrastive_rows', 'paper', r"contrastive_rows must be one of \('all', 'two_view'\)"),
            ('model.partner_jitter', -1.0, 'partner_jitter must be a distance >= 0'),
            # tiny_config's partner_centers is off: a jitter would move nothing.
-           ('model.partner_jitter', 1.0, 'partner_jitter moves partner centres: it needs')]
+           ('model.partner_jitter', 1.0, 'partner_jitter moves partner centres: it needs'),
+           ('inference.keypoints', 'ground', r"inference.keypoints must be one of \('all', "
+            r"'structure'\), got 'ground'")]
   for field, value, message in cases:
     config = tiny_config.copy_and_resolve_references()
     section, name = field.split('.')
@@ -130,7 +132,8 @@ def test_config_upgrade_fills_only_missing_keys_with_what_old_runs_used():
   up = config_upgrade.upgrade(old)
   assert up.model.self_rotation == 'gaussian' and up.train.lr_schedule == 'constant'
   assert up.model.orientation_head == 'equivariant'            # stored values stay
-  assert up.inference.to_dict() == {'num_samples': 0, 'draws': 1, 'voxel_size': 0.2}
+  assert up.inference.to_dict() == {'num_samples': 0, 'draws': 1, 'voxel_size': 0.2,
+                                    'keypoints': 'all'}
   old_set = {'test_kitti': {'num_scenes': 1}, 'test_oxford': {'num_scenes': 1}}
   assert config_upgrade.upgrade_synthetic(old_set) == {
       'test_kitti': {'num_scenes': 1, 'random_yaw': False},

@@ -8,7 +8,7 @@ import ml_collections
 import numpy as np
 import pytest
 
-from ssd_jax import checkpoint, inference, pretrained, train
+from ssd_jax import checkpoint, errors, inference, pretrained, train
 from tests.conftest import tiny_config_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -59,6 +59,11 @@ def test_damaged_exports_are_named(tiny_run, tmp_path):
   (out / 'weights.msgpack').write_bytes(data[: len(data) // 2])
   with pytest.raises(ValueError, match='weights.msgpack: damaged'):
     pretrained.load(out)
+  config = _config_of(tiny_run)
+  config.inference.keypoints = 'ground'
+  bad = pretrained.export(inference.load(tiny_run), config, tmp_path / 'bad_keypoints')
+  with pytest.raises(errors.UserError, match="inference.keypoints must be one of .*got 'ground'"):
+    pretrained.load(bad)
   (out / 'config.json').write_text('{"config": {"model": ')
   with pytest.raises(ValueError, match='config.json: not a readable model config'):
     pretrained.load(out)

@@ -36,12 +36,14 @@ def get_config():
   del config.evals['real']
   config.evals.synthetic.dataset = 'data_cache/os0_pairs/synthetic'
   config.evals.synthetic.title = 'OS0-64 to OS0-64 pairs in unseen scenes'
-  config.evals.synthetic.rows = ('auto+fpfh+upright', 'auto+ours+upright',
+  config.evals.synthetic.rows = ('auto+fpfh+upright', 'structure+fpfh+upright',
+                                 'auto+ours+upright', 'structure+ours+upright',
                                  'auto+ours_rescan+upright', 'auto+ours_mined+upright',
-                                 'auto+adapted+upright', 'auto+adapted_rate1+upright',
+                                 'auto+adapted+upright', 'structure+adapted+upright',
+                                 'auto+adapted_rate1+upright',
                                  'auto+adapted_from_mined+upright',
                                  'bev', 'auto+ours+upright+verify+bev',
-                                 'auto+adapted+upright+verify+bev')
+                                 'structure+adapted+upright+verify+bev')
   config.checkpoints.adapted = 'exports/os0'
   config.checkpoints.adapted_rate1 = 'exports/os0_rate1'
   config.checkpoints.adapted_from_mined = 'exports/os0_from_mined'

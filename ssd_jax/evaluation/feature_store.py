@@ -1,7 +1,8 @@
 """Keypoint x descriptor rows and a per-cloud cache of their features.
 
-A row is "keypoints+descriptor": keypoints `iss`, `random` or a checkpoint name
-(its detector: attention + NMS, docs/method.md §4); descriptors `fpfh` or a
+A row is "keypoints+descriptor": keypoints `iss`, `random`, `auto` (farthest-point),
+`structure` (farthest-point of the points above the ground, `pipeline.keypoint_domain`)
+or a checkpoint name (its detector: attention + NMS, docs/method.md §4); descriptors `fpfh` or a
 checkpoint name. Checkpoint names map to training workdirs in the configs
 (`checkpoints.ours`, `checkpoints.feat3dnet`). Registration and the precision
 test use the same keypoints and descriptors of the same clouds, so one
@@ -25,9 +26,10 @@ from ssd_jax.registration import features as features_lib, leveling, pipeline
 from ssd_jax.registration import keypoints as keypoints_lib
 from ssd_jax.registration import prepared as prepared_lib
 
-BUILTIN_KEYPOINTS = ('iss', 'random', 'auto')
+BUILTIN_KEYPOINTS = ('iss', 'random', 'auto', 'structure')
 BUILTIN_DESCRIPTORS = ('fpfh',)
-NAMES = {'iss': 'ISS', 'random': 'random', 'auto': 'farthest-point', 'fpfh': 'FPFH',
+NAMES = {'iss': 'ISS', 'random': 'random', 'auto': 'farthest-point',
+         'structure': 'farthest-point structure', 'fpfh': 'FPFH',
          'ours': 'Ours',
          'feat3dnet': '3DFeat-Net', 'ours_detector': 'Ours (self-sup. detector)',
          'ours_run': 'Ours (this run)', 'ours_rescan': 'Ours (re-scan views)',
@@ -171,7 +173,8 @@ class FeatureStore:
     self._fpfh = {}   # (path, sources) -> ({point index: row}, FPFH [M, 33]) of their keypoints
     self.seconds = collections.defaultdict(float)
     self._clouds, self._keypoints, self._descriptors = {}, {}, {}
-    self._coarse = {}   # path -> positions of the coarse level in its 'auto' keypoints
+    # (path, 'auto' or 'structure') -> positions of the coarse level in those keypoints
+    self._coarse = {}
     self._pair_memos = {}   # (path 1, path 2) -> `prepared.PreparedPair.memo`
     # The last few clouds' learned-descriptor clusters, which every model of one radius,
     # cluster size and draw count shares (`inference.neighbourhoods`): ~2 MB a cloud.
@@ -242,8 +245,10 @@ class FeatureStore:
     if key not in self._keypoints:
       points = self.cloud(path)
       t0 = time.perf_counter()
-      if source == 'auto':
-        idx, self._coarse[str(path)] = pipeline.auto_keypoints(points, self.num_keypoints)
+      if source in ('auto', 'structure'):
+        domain = 'all' if source == 'auto' else source
+        idx, self._coarse[key] = pipeline.auto_keypoints(points, self.num_keypoints,
+                                                         domain=domain)
       elif source in BUILTIN_KEYPOINTS:
         # The protocol: a detector that finds too few keypoints fails the pair.
         idx, _ = pipeline.compute_keypoints(points, source, seed=self.seed, fallback=False)
@@ -284,7 +289,7 @@ class FeatureStore:
         self.seconds[stage] += time.perf_counter() - t0
         return d
 
-      coarse = self._coarse.get(str(path)) if kp == 'auto' else None
+      coarse = self._coarse.get((str(path), kp))
       self._descriptors[key] = pipeline.FeatureLevels(
           points, [idx] if coarse is None else [idx[coarse], idx], timed)
     levels = self._descriptors[key]

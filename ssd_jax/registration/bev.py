@@ -68,18 +68,24 @@ def _size(extent: float, resolution: float) -> int:
   return int(np.ceil(2 * extent / resolution))
 
 
-def rising_from_ground(points: np.ndarray) -> np.ndarray:
-  """Points [N, 3] metres, z up -> [N] bool: the points `HEIGHT` above the local ground
-  (the lowest point within ~1.5 `GROUND_CELL`s): walls, poles, trunks, cars."""
+def height_above_ground(points: np.ndarray) -> np.ndarray:
+  """Points [N, 3] metres, z up -> [N] metres above the local ground (the lowest point
+  within ~1.5 `GROUND_CELL`s)."""
   points = np.asarray(points, np.float64)
   if not len(points):
-    return np.zeros(0, bool)
+    return np.zeros(0)
   cell = np.floor(points[:, :2] / GROUND_CELL).astype(np.int64)
   cell -= cell.min(0)
   lowest = np.full(cell.max(0) + 1, np.inf)
   np.minimum.at(lowest, (cell[:, 0], cell[:, 1]), points[:, 2])
   lowest = ndimage.minimum_filter(lowest, size=3, mode='nearest')
-  height = points[:, 2] - lowest[cell[:, 0], cell[:, 1]]
+  return points[:, 2] - lowest[cell[:, 0], cell[:, 1]]
+
+
+def rising_from_ground(points: np.ndarray) -> np.ndarray:
+  """Points [N, 3] metres, z up -> [N] bool: the points `HEIGHT` above the local ground
+  (`height_above_ground`): walls, poles, trunks, cars."""
+  height = height_above_ground(points)
   return (height > HEIGHT[0]) & (height < HEIGHT[1])
 
 

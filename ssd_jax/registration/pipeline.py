@@ -213,7 +213,8 @@ def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0
 
     auto     `num_random` farthest-point keypoints: evenly spread, so found again in a
              scan from another sensor or standpoint (docs/notes/cross_sensor.md), the way the
-             network's training samples its cluster centres; the register default
+             network's training samples its cluster centres; the register default (of
+             the model's `keypoint_domain`, `domain_of`)
     iss      ISS with the paper's radii (docs/method.md §4); with `fallback`, a sparse
              cloud falls back to wider radii, then farthest-point keypoints
              (`keypoints.iss_with_fallbacks`); without, the evaluation protocol
@@ -223,7 +224,8 @@ def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0
   points = check_cloud(points)
   if method == 'auto':
     keypoints_lib.check_registrable(points, 'auto keypoints')
-    return keypoints_lib.farthest_point_keypoints(points, num_random), ''
+    among = keypoint_domain(points, domain_of(model))
+    return among[keypoints_lib.farthest_point_keypoints(points[among], num_random)], ''
   if method == 'iss':
     if fallback:
       return keypoints_lib.iss_with_fallbacks(points)
@@ -285,13 +287,39 @@ def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str =
                        {'grid': t1 - t0, 'keypoints': t2 - t1, 'descriptors': t3 - t2}, note, grid)
 
 
+def domain_of(model) -> str:
+  """What 'auto' keypoints are sampled from with `model` (`inference.KEYPOINT_SELECTIONS`):
+  its config's `inference.keypoints`; 'all' without a model."""
+  return getattr(model, 'keypoints', 'all') if model is not None else 'all'
+
+
+def keypoint_domain(points: np.ndarray, domain: str = 'all') -> np.ndarray:
+  """Sorted indices into points [N, 3] (metres, z up) that 'auto' keypoints are sampled
+  from: every point ('all'), or the points above the ground ('structure':
+  `bev.height_above_ground` over `bev.HEIGHT`'s floor: walls, poles, trunks, cars,
+  canopies), all of them where fewer than `keypoints.ENOUGH_KEYPOINTS` rise. Two scans of
+  one unit draw the same rings on the ground at the same ranges from their sensors; for a
+  unit whose matches there pull two standpoints together, `experiments.adapt` picks
+  'structure' (`keypoint_choice`, docs/notes/cross_sensor.md)."""
+  if domain not in inference.KEYPOINT_SELECTIONS:
+    raise ValueError(f'keypoint domain must be one of {inference.KEYPOINT_SELECTIONS}, '
+                     f'got {domain!r}')
+  if domain == 'all':
+    return np.arange(len(points))
+  rising = np.flatnonzero(bev.height_above_ground(points) > bev.HEIGHT[0])
+  return rising if len(rising) >= keypoints_lib.ENOUGH_KEYPOINTS else np.arange(len(points))
+
+
 def auto_keypoints(points: np.ndarray, num: int = keypoints_lib.FARTHEST_POINT_KEYPOINTS,
-                   coarse: int = COARSE_KEYPOINTS) -> tuple[np.ndarray, np.ndarray]:
-  """`compute_keypoints(points, 'auto')` and its coarse level: (sorted indices [K] into
-  points [N, 3], positions in them of the first `coarse` farthest-point picks)."""
+                   coarse: int = COARSE_KEYPOINTS, domain: str = 'all'
+                   ) -> tuple[np.ndarray, np.ndarray]:
+  """`compute_keypoints(points, 'auto')` (of the `keypoint_domain`) and its coarse level:
+  (sorted indices [K] into points [N, 3], positions in them of the first `coarse`
+  farthest-point picks)."""
   points = check_cloud(points)
   keypoints_lib.check_registrable(points, 'auto keypoints')
-  order = keypoints_lib.farthest_point_order(points, num)
+  among = keypoint_domain(points, domain)
+  order = among[keypoints_lib.farthest_point_order(points[among], num)]
   idx = np.unique(order)
   return idx, np.searchsorted(idx, np.unique(order[:coarse]))
 
@@ -307,8 +335,9 @@ def feature_levels(points: np.ndarray, keypoints: str = 'auto', descriptor: str 
                    coarse: int = COARSE_KEYPOINTS) -> FeatureLevels:
   """The `FeatureLevels` of one cloud [N, 3] (on its grid already, any coordinates: as
   `features_anywhere`): with 'auto' keypoints and `coarse` > 0 two levels, the first
-  `coarse` farthest-point picks, then all `keypoints.FARTHEST_POINT_KEYPOINTS` (the
-  sampling continued only where a pair needs them), else one. Nothing is described yet."""
+  `coarse` farthest-point picks (of `keypoint_domain`), then all
+  `keypoints.FARTHEST_POINT_KEYPOINTS` (the sampling continued only where a pair needs
+  them), else one. Nothing is described yet."""
   points = check_cloud(points, dtype=np.float64)
   offset = local_origin(points)
   local = check_cloud(points - offset)
@@ -316,9 +345,10 @@ def feature_levels(points: np.ndarray, keypoints: str = 'auto', descriptor: str 
   note = ''
   if keypoints == 'auto' and coarse > 0:
     keypoints_lib.check_registrable(local, 'auto keypoints')
-    sampler = keypoints_lib.FarthestPointSampler(local)
-    levels = [lambda: np.unique(sampler.order(coarse)),
-              lambda: np.unique(sampler.order(keypoints_lib.FARTHEST_POINT_KEYPOINTS))]
+    among = keypoint_domain(local, domain_of(model))
+    sampler = keypoints_lib.FarthestPointSampler(local[among])
+    levels = [lambda: among[np.unique(sampler.order(coarse))],
+              lambda: among[np.unique(sampler.order(keypoints_lib.FARTHEST_POINT_KEYPOINTS))]]
   else:
     idx, note = compute_keypoints(local, keypoints, model, seed)
     if len(idx) < 3:
