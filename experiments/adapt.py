@@ -17,10 +17,11 @@ passes (scans not in capture order), and with `--pairs=none`, it trains the pape
 single-scan objective alone. Last, with `--keypoints=auto`, the adapted model's
 descriptor alone registers 32 pairs farther apart than the miner reached (each two kept
 pairs chained) twice, its keypoints sampled from all points and from the structure above
-the ground, and the export keeps the domain that registers more (`registration.keypoint_choice`; 'structure' where the sensor's
-ground rings mislead its matches). OUT/run holds the training run (rerun the command to
-resume it, mining too); OUT holds the exported model (config.json, weights.msgpack) and
-MODEL_CARD.md (base model, scans, pairs, steps, keypoints, wall time, machine, command).
+the ground, and the export keeps the domain that registers more
+(`registration.keypoint_choice`; 'structure' where the sensor's ground rings mislead its
+matches). OUT/run holds the training run (rerun the command to resume it, mining too);
+OUT holds the exported model (config.json, weights.msgpack) and MODEL_CARD.md (base
+model, scans, pairs, steps, keypoints, wall time, machine, command).
 docs/notes/benchmarks.md times it on 2 CPU cores.
 """
 

@@ -63,8 +63,9 @@ class Model:
     voxel_size: the voxel grid (metres) of its training clouds, on which
       `registration.pipeline` puts every cloud before describing it.
     keypoints: `KEYPOINT_SELECTIONS`, what registration's 'auto' keypoints are sampled
-      from: 'all' (the whole cloud) or 'structure' (the points above its ground; `experiments.adapt` picks it for a sensor where it
-      registers more of the mined pairs).
+      from: 'all' (the whole cloud) or 'structure' (the points above its ground;
+      `experiments.adapt` picks it for a sensor where it registers more of the mined
+      pairs).
   """
   net: network.FeatureNet
   variables: Any

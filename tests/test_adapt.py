@@ -149,8 +149,8 @@ def test_the_choice_counts_the_pairs_each_domain_registers_against_the_miners_tr
     pairs.append(mined_pairs.MinedPair(str(tmp_path / 'a.npy'), str(tmp_path / f'{n}.npy'),
                                        2 + n, t, 0.9, True, True))
   # A label 10 m off: no domain registers it against that.
-  wrong = dataclasses.replace(pairs[0], gap=1, transform=pairs[0].transform @ geometry.make_transform(
-      np.eye(3), np.array([10.0, 0.0, 0.0])))
+  off = geometry.make_transform(np.eye(3), np.array([10.0, 0.0, 0.0]))
+  wrong = dataclasses.replace(pairs[0], gap=1, transform=pairs[0].transform @ off)
   pairs.append(wrong)
   # Each pair on its own: the choice registers the pairs it is given, against their labels.
   counts = {domain: keypoint_choice.registered(pretrained.load('ours'), pairs, np.load, domain)

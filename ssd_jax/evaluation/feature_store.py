@@ -2,8 +2,8 @@
 
 A row is "keypoints+descriptor": keypoints `iss`, `random`, `auto` (farthest-point),
 `structure` (farthest-point of the points above the ground, `pipeline.keypoint_domain`)
-or a checkpoint name (its detector: attention + NMS, docs/method.md §4); descriptors `fpfh` or a
-checkpoint name. Checkpoint names map to training workdirs in the configs
+or a checkpoint name (its detector: attention + NMS, docs/method.md §4); descriptors
+`fpfh` or a checkpoint name. Checkpoint names map to training workdirs in the configs
 (`checkpoints.ours`, `checkpoints.feat3dnet`). Registration and the precision
 test use the same keypoints and descriptors of the same clouds, so one
 `FeatureStore` computes each once.

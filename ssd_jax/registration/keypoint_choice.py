@@ -9,11 +9,11 @@ help. So `experiments.adapt` registers mined pairs with the adapted model, its d
 alone, once from each keypoint domain of `inference.KEYPOINT_SELECTIONS`, against the
 miner's transforms, and keeps the domain that registers more ('all' on a tie).
 
-The pairs the miner keeps are those its teacher registers with confidence; the adapted
-descriptor registers them all from either domain. The choice is made where the two can
-differ: pairs farther apart than the miner's own, composed of two kept pairs
-(`mined_pairs.chained`): with G the largest gap at which the miner kept CHOICE_PAIRS
-pairs, the gaps G+1 to 2G, as many pairs of each.
+The pairs the miner keeps are those its teacher registers with confidence: on the OS0-64
+drive the adapted descriptor registered all 32 of the farthest from either domain. The
+choice is made where the two can differ: pairs farther apart than the miner's own,
+composed of two kept pairs (`mined_pairs.chained`): with G the largest gap at which the
+miner kept CHOICE_PAIRS pairs, the gaps G+1 to 2G, as many pairs of each.
 """
 
 from __future__ import annotations
@@ -68,7 +68,8 @@ def choice_pairs(pairs: Sequence[mined_pairs.MinedPair],
     share = (count - len(out)) // (len(gaps) - i)
     group = pool[gap]
     take = min(share, len(group))
-    out += [group[j] for j in np.linspace(0, len(group) - 1, take).round().astype(int)] if take else []
+    if take:
+      out += [group[j] for j in np.linspace(0, len(group) - 1, take).round().astype(int)]
   return out
 
 
