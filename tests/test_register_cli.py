@@ -101,6 +101,7 @@ def test_register_cli_describes_with_the_shipped_model_by_default(tiny_set, tmp_
   assert out.returncode == 0, out.stderr[-3000:]
   result = json.loads((tmp_path / 'r.json').read_text())
   assert result['descriptor'] == 'learned' and result['model'] == 'ours'
+  assert result['keypoints'] == 'auto' and result['keypoint_domain'] == 'all'   # ours: all points
   # Verified poses: one sampling of 32 points of each ball (an eighth of the network's
   # work), not the model's own 4 of 64 (the paper's protocol).
   assert result['draws'] == pipeline.VERIFIED_DRAWS == 1

@@ -170,7 +170,11 @@ def pair_json(reg: pipeline.Registration, f1: pipeline.CloudFeatures,
               points: tuple[int, int], voxel: float) -> dict:
   """The one-pair JSON of the register command (docs/registration.md)."""
   learned = options.descriptor == 'learned'
-  out = {'keypoints': options.keypoints, 'descriptor': options.descriptor,
+  # Where 'auto' keypoints were sampled (`pipeline.keypoint_domain`): 'all' points, or the
+  # 'structure' above the ground for a model `experiments.adapt` set so.
+  domain = pipeline.domain_of(model) if options.keypoints == 'auto' else None
+  out = {'keypoints': options.keypoints, 'keypoint_domain': domain,
+         'descriptor': options.descriptor,
          'num_keypoints': [len(f1.xyz), len(f2.xyz)], 'keypoint_levels': reg.levels_tried,
          'inliers': int(reg.inliers.sum()), 'trials': reg.trials,
          'model': model_name if learned else None, 'notes': reg.notes,
@@ -194,7 +198,8 @@ def summary(out: dict, reg: pipeline.Registration) -> str:
   total seconds, the overlap fitness and, against ground truth, 'errors')."""
   u = reg.uncertainty
   least = uncertainty.describe_direction(np.append(np.zeros(3), u.translation_directions[0]))
-  lines = [f'== {out["keypoints"]} keypoints + {out["descriptor"]} descriptors: '
+  domain = ' (structure)' if out.get('keypoint_domain') == 'structure' else ''
+  lines = [f'== {out["keypoints"]}{domain} keypoints + {out["descriptor"]} descriptors: '
            f'{out["num_keypoints"][0]} / {out["num_keypoints"][1]} keypoints, '
            f'{out["inliers"]} inliers, {out["trials"]} RANSAC trials, fitness '
            f'{reg.fitness:.3f}, inlier RMSE {reg.inlier_rmse:.3f} m, '
