@@ -60,7 +60,7 @@ flags.DEFINE_integer('cold_pairs', 3, 'Pairs timed as one new process each (firs
 flags.DEFINE_integer('loop_scans', 12, 'Loop-closure list: every pair among the first N '
                      'clouds of the first set (0: none).')
 flags.DEFINE_list('methods', ['register', 'open3d', 'kiss_matcher'], 'Rows.')
-flags.DEFINE_float('kiss_voxel', 0.3, "KISS-Matcher's voxel size (metres).")
+flags.DEFINE_float('kiss_voxel', reference.KISS_VOXEL, "KISS-Matcher's voxel size (metres).")
 flags.DEFINE_list('register_flags', [], 'Extra flags of the register command, e.g. '
                   '--register_flags=--sampling=uniform (an ablation of its defaults).')
 
@@ -75,35 +75,7 @@ def _read(path) -> np.ndarray:
   return clean.clean_cloud(io.read_cloud(path), str(path), np.float64)
 
 
-def _kiss_matcher():
-  """The kiss_matcher module, or None (with one line) where it is not installed."""
-  try:
-    import kiss_matcher  # pylint: disable=g-import-not-at-top  (optional anchor)
-  except ImportError:
-    print("kiss_matcher: not installed (pip install -e '.[bench]'); its rows are skipped")
-    return None
-  return kiss_matcher
-
-
-def kiss_matcher_register(module, points1: np.ndarray, points2: np.ndarray,
-                          voxel: float) -> np.ndarray:
-  """T_12 by KISS-Matcher (cloud 2 onto cloud 1), refined by Open3D's point-to-plane ICP."""
-  import open3d as o3d  # pylint: disable=g-import-not-at-top  (the anchor's own tool)
-  matcher = module.KISSMatcher(module.KISSMatcherConfig(voxel))
-  solution = matcher.estimate(np.asarray(points2, np.float32), np.asarray(points1, np.float32))
-  t = np.eye(4)
-  t[:3, :3], t[:3, 3] = np.asarray(solution.rotation), np.asarray(solution.translation)
-  reg = o3d.pipelines.registration
-  target = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points1))
-  target.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=1.0, max_nn=30))
-  source = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points2))
-  for distance in (1.0, 0.5):
-    t = np.asarray(reg.registration_icp(source, target, distance, t,
-                                        reg.TransformationEstimationPointToPlane()).transformation)
-  return t
-
-
-def _in_process(method: str, pairs, kiss) -> tuple[list[float], list[bool]]:
+def _in_process(method: str, pairs) -> tuple[list[float], list[bool]]:
   """An anchor over the pairs in this process -> (seconds per pair, success per pair)."""
   seconds, success = [], []
   for n, pair in enumerate(tqdm.tqdm(pairs, desc=method, unit='pair', leave=False)):
@@ -112,7 +84,7 @@ def _in_process(method: str, pairs, kiss) -> tuple[list[float], list[bool]]:
     if method == 'open3d':
       t = reference.open3d_register(p1, p2, n, 'paper')[0]
     else:
-      t = kiss_matcher_register(kiss, p1, p2, FLAGS.kiss_voxel)
+      t = reference.kiss_matcher_register(p1, p2, FLAGS.kiss_voxel)
     seconds.append(time.perf_counter() - t0)
     success.append(bool(metrics.registration_errors(pair.transform, t)['success']))
   return seconds, success
@@ -147,8 +119,8 @@ def _cold(method: str, pair) -> float:
     if method == 'open3d':
       call = "from ssd_jax.registration.reference import open3d_register as r; r(a, b, settings='paper')"
     else:
-      call = ('import kiss_matcher; from experiments.benchmark_register import '
-              f'kiss_matcher_register as r; r(kiss_matcher, a, b, {FLAGS.kiss_voxel})')
+      call = ('from ssd_jax.registration.reference import kiss_matcher_register as r; '
+              f'r(a, b, {FLAGS.kiss_voxel})')
     cmd = [sys.executable, '-c', 'import sys; from ssd_jax.data import io; '
            'a, b = (io.read_cloud(p).astype(float) for p in sys.argv[1:3]); ' + call,
            str(pair.cloud1), str(pair.cloud2)]
@@ -175,8 +147,10 @@ def main(argv):
   sets = {d: registration_sets.read_registration_set(d) for d in FLAGS.datasets}
   if FLAGS.num_pairs:
     sets = {d: pairs[:FLAGS.num_pairs] for d, pairs in sets.items()}
-  kiss = _kiss_matcher() if 'kiss_matcher' in FLAGS.methods else None
-  methods = [m for m in FLAGS.methods if m != 'kiss_matcher' or kiss is not None]
+  methods = list(FLAGS.methods)
+  if 'kiss_matcher' in methods and reference.kiss_matcher is None:
+    print(f'kiss_matcher: {reference.KISS_MISSING}; its rows are skipped')
+    methods.remove('kiss_matcher')
   rows, stage_rows = [], []   # (set, method, regime, pairs, seconds [n], success or None)
   for name, pairs in sets.items():
     if 'register' in methods:
@@ -191,7 +165,7 @@ def main(argv):
       stage_rows.append((name, {s: float(np.median([float(r[f'seconds_{s}'] or 0) for r in out]))
                                 for s in pipeline.STAGES}))
     for method in methods[1:] if methods[0] == 'register' else methods:
-      seconds, ok = _in_process(method, pairs, kiss)
+      seconds, ok = _in_process(method, pairs)
       rows.append((name, method, 'batch, in process', len(pairs), seconds, ok))
   first = next(iter(sets.values()))
   if 'register' in methods:

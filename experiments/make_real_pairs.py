@@ -9,11 +9,17 @@ from a displaced, turned virtual sensor; `ssd_jax.data.rescan`).
     # the whole unit x distance set)
     python -m experiments.make_real_pairs --sensor=vlp16 --min_shift=10 --max_shift=20 \
         --out=data_cache/real_pairs_vlp16
+    # pairs of real drives' own scans, scored against the drives' poses (no re-scan):
+    # per drive and distance bin up to --per_bin pairs, each as driven and turned ~180
+    # degrees (a revisit from the other heading), with the overlap the poses give
+    python -m experiments.make_real_pairs --drives=real_drives/* --out=data_cache/real_drives
 
 Every scan matching --sources (default: every `.bin` under REAL/example and
 REAL/kitti_object_velodyne) gives --pairs_per_cloud
-pairs, one per equal bin of relative yaw over the whole circle. The set is a function of
---seed; the real scans are read, never copied into the project.
+pairs, one per equal bin of relative yaw over the whole circle. With --drives, each drive
+folder (scans/NNNNNN.bin + poses.txt, `ssd_jax.data.real_drives`) gives pairs of its own
+scans. The set is a function of --seed; the real scans are read, never copied into the
+project.
 """
 
 import os
@@ -24,7 +30,7 @@ from absl import flags
 from tqdm import auto as tqdm
 
 from ssd_jax import cli, sensors
-from ssd_jax.data import rescan
+from ssd_jax.data import real_drives, rescan
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('real', os.environ.get('SSD_JAX_SHARED_DATA', '../shared/data'),
@@ -45,6 +51,11 @@ flags.DEFINE_float('max_shift', rescan.RescanConfig.max_shift,
                    'Farthest standpoint of the second view, metres.')
 flags.DEFINE_float('max_range', rescan.RescanConfig.max_range,
                    'Both views keep what lies within this many metres of their centre.')
+flags.DEFINE_list('drives', [], 'Globs of real drive folders under --real (scans/ + '
+                  'poses.txt): pairs of their own scans instead of re-scans.')
+flags.DEFINE_list('bins', ['0', '2', '5', '10', '20', '30'], 'With --drives: edges of the '
+                  'distance bins, metres (pairs 0-2 m apart only where turned >= 20 degrees).')
+flags.DEFINE_integer('per_bin', 8, 'With --drives: pairs per drive and distance bin.')
 flags.DEFINE_list('tilt', ['0', '0'], 'Degrees lo,hi: tilt the second view\'s sensor by an angle '
                   'in this range about a random horizontal axis (a pitched or rolled unit).')
 
@@ -70,6 +81,8 @@ def main(argv):
   if len(tilt) != 2 or not 0 <= tilt[0] <= tilt[1] <= 90:
     raise SystemExit(f'error: --tilt must be lo,hi degrees with 0 <= lo <= hi <= 90, got '
                      f'{",".join(FLAGS.tilt)}')
+  if FLAGS.drives:
+    return _drives()
   sources = [p for pattern in FLAGS.sources for p in sorted(Path(FLAGS.real).glob(pattern))]
   if not sources:
     raise SystemExit(f'error: {FLAGS.real}: no scans match {",".join(FLAGS.sources)} '
@@ -82,6 +95,26 @@ def main(argv):
     rows = rescan.make_rescan_set(sources, FLAGS.out, FLAGS.seed, FLAGS.pairs_per_cloud,
                                   cfg, progress=bar.update)
   print(f'wrote {FLAGS.out}: {len(rows)} pairs from {len(sources)} real scans')
+
+
+def _drives():
+  try:
+    edges = [float(b) for b in FLAGS.bins]
+  except ValueError:
+    edges = []
+  if len(edges) < 2 or any(b >= c for b, c in zip(edges, edges[1:])) or edges[0] < 0:
+    raise SystemExit(f'error: --bins must be increasing metres >= 0, got {",".join(FLAGS.bins)}')
+  if FLAGS.per_bin < 1:
+    raise SystemExit(f'error: --per_bin must be >= 1, got {FLAGS.per_bin}')
+  folders = [p for pattern in FLAGS.drives for p in sorted(Path(FLAGS.real).glob(pattern))
+             if p.is_dir()]
+  if not folders:
+    raise SystemExit(f'error: {FLAGS.real}: no drive folders match {",".join(FLAGS.drives)} '
+                     '(set --real or SSD_JAX_SHARED_DATA)')
+  with tqdm.tqdm(desc='drive pairs', unit='pair') as bar:
+    rows = real_drives.make_set(folders, FLAGS.out, list(zip(edges, edges[1:])), FLAGS.per_bin,
+                                FLAGS.seed, progress=bar.update)
+  print(f'wrote {FLAGS.out}: {len(rows)} pairs from {len(folders)} drives')
 
 
 if __name__ == '__main__':

@@ -68,7 +68,6 @@ flags.DEFINE_string('plot', None, 'Draw the clouds and inlier matches here (PNG)
 flags.DEFINE_string('pairs', None, 'Batch mode: a file of "cloud1 cloud2" lines.')
 flags.DEFINE_string('sequence', None, 'Batch mode: each scan of this folder to the next.')
 flags.DEFINE_string('out', None, 'Batch mode: output folder (a rerun keeps its rows).')
-flags.DEFINE_bool('allow_degenerate', False, 'Return a pose the scans leave free (a corridor).')
 flags.DEFINE_bool('stop_on_error', False, 'Batch mode: stop at the first pair that fails.')
 
 
@@ -101,21 +100,25 @@ def _batch(options: pipeline.Options, model, model_name: str) -> None:
                                    say=tqdm.tqdm.write if _show_progress() else print)
   for result in tqdm.tqdm(results, total=len(todo), desc='registration', unit='pair',
                           disable=not _show_progress()):
-    error = result.error or outputs.refusal(result.registration, FLAGS.allow_degenerate)
+    error = result.error
     if error and FLAGS.stop_on_error:
       raise errors.UserError(f'{result.target} / {result.source}: {error}')
     t_gt = (outputs.ground_truth(FLAGS.groundtruth, result.target, result.source, False, truth)
             if truth is not None and not error else None)
     written.add(result, t_gt, error)
+  failed = written.failed(pairs)
+  registered = written.registered(pairs)
   print(f'wrote {written.path}: {len(pairs)} pairs'
         + (f' ({written.kept} kept from an earlier run)' if written.kept else '')
-        + f', {options.descriptor} descriptors ({model_name if model else "Open3D"})')
-  failed = written.failed(pairs)
+        + f', {options.descriptor} descriptors ({model_name if model else "Open3D"}): '
+        f'{sum(registered)} registered, {len(pairs) - sum(registered) - sum(failed)} not '
+        '(the verdict column says why)' + (f', {sum(failed)} failed' if any(failed) else ''))
   if FLAGS.sequence:
     poses = outputs.chain(written.transforms(pairs))
     np.savetxt(os.path.join(FLAGS.out, 'poses.txt'), poses[:, :3, :].reshape(len(poses), 12))
     viz.plot_trajectory(poses, os.path.join(FLAGS.out, 'trajectory.png'),
-                        f'{len(pairs) + 1} scans of {FLAGS.sequence}', np.asarray(failed))
+                        f'{len(pairs) + 1} scans of {FLAGS.sequence}',
+                        ~np.asarray(registered))
     print(f'wrote {os.path.join(FLAGS.out, "poses.txt")} and trajectory.png')
   if any(failed):
     raise errors.UserError(f'{sum(failed)} of {len(pairs)} pairs failed (the error column of '
@@ -173,8 +176,6 @@ def _register_pair(options, loaded, name: str, bar: cli.StageBar) -> None:
         target=clouds[0], source=clouds[1], model=loaded,
         options=dataclasses.replace(o, voxel=0.0),   # on the grid already
         progress=lambda s, d=o.descriptor: bar.stage(f'{d}: {s}') if 'grid' not in s else None)
-    if refused := outputs.refusal(reg, FLAGS.allow_degenerate):
-      raise errors.UserError(refused)
     bar.close() if o is options[-1] else bar.clear()   # redrawn below this report
     out = outputs.pair_json(reg, f1, f2, o, o.describing(loaded), name,
                             (len(clouds[0]), len(clouds[1])), voxel)

@@ -387,44 +387,46 @@ def test_a_cloud_too_large_for_memory_fails_in_one_line(tiny_set, monkeypatch):
 
 @pytest.mark.multiprocess
 @pytest.mark.slow
-def test_a_corridor_is_refused_naming_its_free_direction_or_returned_with_the_verdict(tmp_path):
-  """Two scans 5 m apart along a straight corridor: one line naming the shift along it and
-  a non-zero exit; --allow_degenerate returns the pose with the verdict and the
-  information matrix in the JSON."""
+def test_a_corridor_comes_back_not_registered_naming_its_free_direction(tmp_path):
+  """Two scans 5 m apart along a straight corridor: the pose comes back with the verdict
+  `registered: false`, degenerate, naming the shift along it, in the summary line and the
+  JSON (with the information matrix); the command ends 0: the pose is an answer, the
+  verdict says not to trust it."""
   cloud1, cloud2, _ = degenerate.scan_pair('corridor')
   np.save(tmp_path / 'a.npy', cloud1)
   np.save(tmp_path / 'b.npy', cloud2)
-  args = ('experiments.register', f'--cloud1={tmp_path / "a.npy"}', f'--cloud2={tmp_path / "b.npy"}')
-  out = _run(*args)
-  assert out.returncode == 1
-  (line,) = out.stderr.strip().splitlines()[-1:]
-  assert line.startswith('error: degenerate: translation along (1.00, ') and (
-      'not fixed by the scans' in line and '--allow_degenerate' in line), out.stderr[-2000:]
-  assert 'T_12' not in out.stdout
-  out = _run(*args, '--allow_degenerate', f'--json={tmp_path / "r.json"}')
+  out = _run('experiments.register', f'--cloud1={tmp_path / "a.npy"}',
+             f'--cloud2={tmp_path / "b.npy"}', f'--json={tmp_path / "r.json"}')
   assert out.returncode == 0, out.stderr[-2000:]
+  (summary,) = [line for line in out.stdout.splitlines() if line.startswith('== ')]
+  assert summary.endswith(')') and ': NOT registered (degenerate: translation along (1.00, ' in (
+      summary), summary
   result = json.loads((tmp_path / 'r.json').read_text())
+  assert result['registered'] is False
+  assert result['verdict']['reason'].startswith('degenerate: translation along (1.00, ')
   assert result['uncertainty']['free'].startswith('translation along (1.00, ')
   assert np.array(result['uncertainty']['information_matrix']).shape == (6, 6)
-  assert 'degenerate: translation along' in out.stdout
 
 
 @pytest.mark.multiprocess
-def test_a_cloud_in_millimetres_gets_a_units_hint(tiny_set, tmp_path):
+def test_a_cloud_in_millimetres_or_centimetres_gets_a_units_hint(tiny_set, tmp_path):
   pair = registration_sets.read_registration_set(tiny_set / 'test_kitti')[0]
-  np.save(tmp_path / 'mm.npy', io.read_cloud(pair.cloud2).astype(np.float64) * 1000)
-  out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={tmp_path / "mm.npy"}')
-  assert out.returncode == 1 and out.stderr.strip().count('\n') == 0, out.stderr[-2000:]
-  assert out.stderr.startswith(f'error: {tmp_path / "mm.npy"}: its points lie ~')
-  assert 'millimetres or centimetres? ssd_jax reads metres' in out.stderr
+  for unit, scale, hint in (('mm', 1000, 'its points lie ~'), ('cm', 100, 'it spans ')):
+    np.save(tmp_path / f'{unit}.npy', io.read_cloud(pair.cloud2).astype(np.float64) * scale)
+    out = _run('experiments.register', f'--cloud1={pair.cloud1}',
+               f'--cloud2={tmp_path / f"{unit}.npy"}')
+    assert out.returncode == 1 and out.stderr.strip().count('\n') == 0, out.stderr[-2000:]
+    assert out.stderr.startswith(f'error: {tmp_path / f"{unit}.npy"}: {hint}'), out.stderr
+    assert 'centimetres? ssd_jax reads metres' in out.stderr
 
 
 @pytest.mark.multiprocess
 @pytest.mark.slow
 def test_a_batch_registers_every_pair_it_can_and_a_rerun_resumes(tiny_set, tmp_path):
-  """Three pairs, the second naming a missing file: the first and third registered, the
-  second's row holds the error, the command ends non-zero naming one failed pair. Once the
-  file exists, a rerun registers only that pair. --stop_on_error stops at it."""
+  """Three pairs, the second naming a missing file: the first and third registered (their
+  verdict too), the second's row holds the error, the command ends non-zero naming one
+  failed pair. Once the file exists, a rerun registers only that pair, and the command
+  counts the poses registered. --stop_on_error stops at it."""
   pairs = registration_sets.read_registration_set(tiny_set / 'test_kitti' / '00')[:2]
   missing = tmp_path / 'later.bin'
   (tmp_path / 'pairs.txt').write_text(f'{pairs[0].cloud1} {pairs[0].cloud2}\n'
@@ -441,12 +443,14 @@ def test_a_batch_registers_every_pair_it_can_and_a_rerun_resumes(tiny_set, tmp_p
     t = np.array([float(row[f'T_12[{i}][{j}]']) for i in range(4) for j in range(4)]).reshape(4, 4)
     assert metrics.registration_errors(pair.transform, t)['success']
     assert float(row['translation_constraint']) > 0 and not row['degenerate']
+    assert row['registered'] == '1' and not row['verdict'] and float(row['structure_fitness']) > 0.5
     assert np.array([float(row[f'information[{i}][{j}]']) for i in range(6)
                      for j in range(6)]).reshape(6, 6)[3, 3] > 1000
   missing.write_bytes(pairs[0].cloud2.read_bytes())
   out = _run(*args)
   assert out.returncode == 0, out.stderr[-2000:]
   assert '3 pairs (2 kept from an earlier run)' in out.stdout
+  assert ': 3 registered, 0 not (the verdict column says why)' in out.stdout
   again = list(csv.DictReader((tmp_path / 'out' / 'registrations.csv').open()))
   assert again[:2] == [rows[0], rows[2]] and not again[2]['error']
   missing.unlink()

@@ -91,6 +91,12 @@ def clean_cloud(points: np.ndarray, name: str = 'cloud', dtype=np.float32) -> np
 # it spans metres to kilometres. Outside these, its numbers are in other units.
 MAX_SPACING = 20.0   # metres: median distance from a point to its nearest neighbour
 MIN_EXTENT = 1.0     # metres: the cloud's longest side
+# A cloud over WIDE_EXTENT metres across whose points lie over WIDE_SPACING apart (median)
+# is a scan in centimetres: a scan's points lie 0.05-0.5 m apart and it spans up to a few
+# hundred metres (in centimetres 5-50 and tens of thousands); a map that wide in metres
+# is gridded finer than WIDE_SPACING.
+WIDE_EXTENT = 1000.0
+WIDE_SPACING = 2.0
 _SPACING_SAMPLE = 5000
 
 
@@ -114,6 +120,10 @@ def units_problem(points: np.ndarray, seed: int = 0) -> str:
     return (f'its points lie ~{spacing:.3g} apart (median), those of a LiDAR cloud in '
             'metres centimetres to a metre: is it in millimetres or centimetres? ssd_jax '
             'reads metres')
+  if extent > WIDE_EXTENT and spacing > WIDE_SPACING:
+    return (f'it spans {extent:.3g} across with its points ~{spacing:.3g} apart (median), '
+            'a LiDAR scan in metres at most a few hundred metres with its points a '
+            'metre apart at most: is it in centimetres? ssd_jax reads metres')
   return ''
 
 

@@ -63,34 +63,42 @@ def read_registration_set(root: str | os.PathLike) -> list[RegistrationPair]:
 # A cross-sensor set's pairs.tsv: which sensor saw each cloud and how far apart they stood.
 PAIR_INFO = 'pairs.tsv'
 PAIR_INFO_COLUMNS = ('idx1', 'idx2', 'sensor1', 'sensor2', 'distance_m', 'yaw_deg', 'source')
+# A real drive's pairs (`real_drives`) add the share of cloud 2 within 0.5 m of cloud 1 under
+# the true pose.
+OVERLAP_COLUMN = 'overlap'
 
 
 def write_pair_info(folder: str | os.PathLike, rows: list[dict]) -> None:
-  """FOLDER/pairs.tsv with `PAIR_INFO_COLUMNS` (floats to 3 decimals)."""
+  """FOLDER/pairs.tsv with `PAIR_INFO_COLUMNS`, and OVERLAP_COLUMN where the rows have
+  it (floats to 3 decimals)."""
   fmt = lambda v: f'{v:.3f}' if isinstance(v, float) else str(v)
-  lines = ['\t'.join(PAIR_INFO_COLUMNS)] + [
-      '\t'.join(fmt(r[c]) for c in PAIR_INFO_COLUMNS) for r in rows]
+  columns = PAIR_INFO_COLUMNS + ((OVERLAP_COLUMN,) if rows and OVERLAP_COLUMN in rows[0] else ())
+  lines = ['\t'.join(columns)] + ['\t'.join(fmt(r[c]) for c in columns) for r in rows]
   (Path(folder) / PAIR_INFO).write_text('\n'.join(lines) + '\n')
 
 
 def read_pair_info(folder: str | os.PathLike) -> dict[tuple[int, int], dict]:
-  """(idx1, idx2) -> {sensor1, sensor2, distance_m, yaw_deg, source} of FOLDER/pairs.tsv,
-  or a CloudFileError naming what is wrong with it."""
+  """(idx1, idx2) -> {sensor1, sensor2, distance_m, yaw_deg, source[, overlap]} of
+  FOLDER/pairs.tsv, or a CloudFileError naming what is wrong with it."""
   path = Path(folder) / PAIR_INFO
   if not path.is_file():
     raise CloudFileError(f'{path}: missing (a cross-sensor set names each pair\'s sensors '
                          'and distance there)')
   lines = path.read_text().splitlines()
-  if not lines or tuple(lines[0].split('\t')) != PAIR_INFO_COLUMNS:
-    raise CloudFileError(f'{path}: the header must be {" ".join(PAIR_INFO_COLUMNS)}')
+  columns = tuple(lines[0].split('\t')) if lines else ()
+  if columns not in (PAIR_INFO_COLUMNS, PAIR_INFO_COLUMNS + (OVERLAP_COLUMN,)):
+    raise CloudFileError(f'{path}: the header must be {" ".join(PAIR_INFO_COLUMNS)} '
+                         f'[{OVERLAP_COLUMN}]')
   info = {}
   for n, line in enumerate(lines[1:], 2):
     parts = line.split('\t')
     try:
-      row = dict(zip(PAIR_INFO_COLUMNS, parts, strict=True))
-      row['distance_m'], row['yaw_deg'] = float(row['distance_m']), float(row['yaw_deg'])
+      row = dict(zip(columns, parts, strict=True))
+      for key in ('distance_m', 'yaw_deg', OVERLAP_COLUMN):
+        if key in row:
+          row[key] = float(row[key])
       info[int(row['idx1']), int(row['idx2'])] = row
     except ValueError:
-      raise CloudFileError(f'{path}, line {n}: expected {len(PAIR_INFO_COLUMNS)} tab-separated '
+      raise CloudFileError(f'{path}, line {n}: expected {len(columns)} tab-separated '
                            f'fields with numeric indices and distance, got {line!r}') from None
   return info

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from typing import Mapping, Sequence, TextIO
 
 import jax
@@ -21,7 +22,8 @@ from tqdm import auto as tqdm
 
 from ssd_jax import distributed, errors
 from ssd_jax.evaluation import feature_store, registration, tables
-from ssd_jax.registration import metrics, reference, verification
+from ssd_jax.data import clean
+from ssd_jax.registration import metrics, pipeline, reference, verification
 
 # Rows that register whole clouds, without the project's keypoints and descriptors:
 # Open3D's own pipeline (the outside reference), and the bird's-eye-view search alone,
@@ -29,11 +31,23 @@ from ssd_jax.registration import metrics, reference, verification
 # is read against it).
 REFERENCE_ROW = 'open3d'
 BEV_ROW = 'bev'
+KISS_ROW = 'kiss_matcher'
 CLOUD_ROWS = {REFERENCE_ROW: 'Open3D ISS + FPFH (paper searches)',
-              BEV_ROW: 'BEV search alone, verified'}
+              BEV_ROW: 'BEV search alone, verified',
+              KISS_ROW: 'KISS-Matcher + ICP (0.3 m voxels)'}
+# Rows run through the register command's own path (`pipeline.register_many` on the set's
+# files, each cloud read and gridded as the command reads it, the pose in the files'
+# frames, with its verdict): the command's defaults with `ours` and with FPFH, and
+# `ours` alone (--verify=0 --bev=0).
+COMMAND_ROWS = {'register': ('register defaults, ours', {}),
+                'register_fpfh': ('register defaults, FPFH', {'descriptor': 'fpfh'}),
+                'register_descriptor': ('descriptor alone (--verify=0 --bev=0), ours',
+                                        {'verify': 0, 'bev': 0})}
 
 
 def label(row: str) -> str:
+  if row in COMMAND_ROWS:
+    return COMMAND_ROWS[row][0]
   return CLOUD_ROWS.get(row) or feature_store.row_label(row)
 
 
@@ -46,6 +60,9 @@ def _register_clouds(row: str, store: feature_store.FeatureStore, pair, seed: in
     t, _, stats = reference.open3d_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2),
                                             seed, 'paper', iss)
     return t, stats
+  if row == KISS_ROW:
+    return reference.kiss_matcher_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2)), {
+        'inliers': 0, 'matches': 0}
   prepared = store.pair(pair.cloud1, pair.cloud2)   # shared with the verified rows
   best, refined, _ = verification.verify(prepared.cloud1.target, prepared.cloud2.source,
                                          prepared.bev_poses(feature_store.BEV_CANDIDATES),
@@ -66,6 +83,7 @@ def register_clouds(pairs: Sequence, store: feature_store.FeatureStore,
 
   def register(n: int, pair) -> dict:
     res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
+    t0 = time.perf_counter()
     try:
       t, stats = _register_clouds(row, store, pair, seed * 1_000_003 + n)
     except ValueError as e:
@@ -73,6 +91,7 @@ def register_clouds(pairs: Sequence, store: feature_store.FeatureStore,
                  rre_geodesic=float('inf'), success=False, error=str(e))
     else:
       res.update(trials=0, inliers=stats['inliers'], matches=stats['matches'],
+                 seconds=time.perf_counter() - t0,
                  **metrics.registration_errors(pair.transform, t))
     if log is not None and one_process:
       log.write(json.dumps(res) + '\n')
@@ -86,6 +105,35 @@ def register_clouds(pairs: Sequence, store: feature_store.FeatureStore,
   return list(results)
 
 
+def register_command(pairs: Sequence, row: str, model, *, log: TextIO | None = None,
+                     progress: bool = True, desc: str = 'register') -> list[dict]:
+  """One of `COMMAND_ROWS` on every pair (`registration_sets.RegistrationPair`s, T_12 in
+  the files' frames), through `pipeline.register_many` as the register command runs them
+  (`model`: the `inference.Model` its learned rows describe with) -> per-pair results in
+  `registration.register_pairs`' layout, with the verdict (`verdict.Verdict.to_json`) and
+  the seconds the pair cost in the batch."""
+  options = pipeline.Options(**COMMAND_ROWS[row][1])
+  stream = pipeline.register_many([(p.cloud1, p.cloud2) for p in pairs], clean.read_metres,
+                                  model=model, options=options, say=lambda line: None)
+  out = []
+  for pair, r in tqdm.tqdm(zip(pairs, stream), total=len(pairs), desc=desc, unit='pair',
+                           disable=not progress):
+    res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2,
+           'seconds': r.seconds}
+    if r.error:
+      res.update(trials=0, inliers=0, matches=0, rte=float('inf'), rre=float('inf'),
+                 rre_geodesic=float('inf'), success=False, error=r.error)
+    else:
+      reg = r.registration
+      res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
+                 **reg.verdict.to_json(),
+                 **metrics.registration_errors(pair.transform, reg.transform))
+    if log is not None:
+      log.write(json.dumps(res) + '\n')
+    out.append(res)
+  return out
+
+
 def distance_bin(distance: float, bins: Sequence[Sequence[float]]) -> str | None:
   """'lo-hi m' of the bin holding `distance` metres, None outside every bin."""
   for lo, hi in bins:
@@ -94,17 +142,36 @@ def distance_bin(distance: float, bins: Sequence[Sequence[float]]) -> str | None
   return None
 
 
+def overlap_bin(overlap: float, bins: Sequence[Sequence[float]]) -> str | None:
+  """'overlap lo-hi' of the bin holding `overlap` (a share), None outside every bin."""
+  for lo, hi in bins:
+    if lo <= overlap < hi:
+      return f'overlap {lo:g}-{min(hi, 1):g}'
+  return None
+
+
 def _cell(results: list[dict]) -> dict:
   s = registration.summarize(results)
   ratios = [r['inliers'] / r['matches'] for r in results if r.get('matches')]
-  return {**s, 'inlier_ratio': float(np.mean(ratios)) if ratios else float('nan')}
+  seconds = [r['seconds'] for r in results if 'seconds' in r]
+  judged = [r for r in results if 'registered' in r]
+  right = [r['registered'] for r in judged if r['success']]
+  wrong = [not r['registered'] for r in judged if not r['success']]
+  share = lambda v: float(np.mean(v)) if v else float('nan')
+  return {**s, 'inlier_ratio': share(ratios), 'seconds': share(seconds),
+          # The verdict: right poses trusted, wrong ones refused, and how many of each.
+          'right_trusted': share(right), 'wrong_refused': share(wrong),
+          'right': len(right), 'wrong': len(wrong)}
 
 
 def matrix(results: Mapping[str, list[dict]], info: Mapping[tuple[int, int], dict],
-           bins: Sequence[Sequence[float]]) -> dict:
+           bins: Sequence[Sequence[float]], overlap_bins: Sequence[Sequence[float]] = ()
+           ) -> dict:
   """{row: {(sensor, bin): cell, (sensor, 'all'): ..., ('all', bin): ..., ('all', 'all')}}
-  where a cell is `registration.summarize` plus the mean inlier ratio. `sensor` is the unit of
-  cloud 2 (cloud 1 is the set's reference unit)."""
+  where a cell is `registration.summarize` plus the mean inlier ratio, seconds a pair and
+  the verdict's shares (`_cell`). `sensor` is the unit of cloud 2 (cloud 1 is the set's
+  reference unit). With `overlap_bins` (shares of cloud 2 on cloud 1 under the true pose,
+  pairs.tsv's `overlap`), also ('overlap', overlap bin) cells."""
   out = {}
   for row, per_pair in results.items():
     groups: dict[tuple[str, str], list[dict]] = {}
@@ -113,30 +180,67 @@ def matrix(results: Mapping[str, list[dict]], info: Mapping[tuple[int, int], dic
       b = distance_bin(meta['distance_m'], bins)
       if b is None:
         continue
-      for key in ((meta['sensor2'], b), (meta['sensor2'], 'all'), ('all', b), ('all', 'all')):
+      keys = [(meta['sensor2'], b), (meta['sensor2'], 'all'), ('all', b), ('all', 'all')]
+      o = overlap_bin(meta['overlap'], overlap_bins) if 'overlap' in meta else None
+      if o is not None:
+        keys.append(('overlap', o))
+      for key in keys:
         groups.setdefault(key, []).append(r)
     out[row] = {key: _cell(rs) for key, rs in groups.items()}
   return out
 
 
+# What the summary says a row's pairs are, by the set's kind.
+INTROS = {
+    'cross_sensor': "Cross-sensor registration on {description}: cloud 1 from the set's "
+                    'reference unit, cloud 2 from the unit of each column, its standpoint in '
+                    'the distance bin, at any yaw.',
+    'real_drives': 'Registration of real drives on {description}: two scans of one drive '
+                   '(the column), their positions in the distance bin, each pair as driven '
+                   'and with cloud 2 turned 180 +- 45 degrees (a revisit from the other '
+                   'heading); overlap: the share of cloud 2 within 0.5 m of cloud 1 under '
+                   'the true pose.'}
+
+
+def _missing(row: str, missing: Mapping[str, str]) -> str:
+  if row in missing:
+    return missing[row]
+  return feature_store.missing_reason(row, missing)
+
+
 def outputs(cells: Mapping[str, dict], rows: Sequence[str], missing: Mapping[str, str],
             sensors: Sequence[str], bins: Sequence[Sequence[float]], workdir: str,
-            description: str, name: str) -> str:
-  """WORKDIR/{name}.md (success summary, one success matrix per row, the detail table)
-  and {name}.csv (one line per row x sensor x distance cell)."""
+            description: str, name: str, overlap_bins: Sequence[Sequence[float]] = (),
+            kind: str = 'cross_sensor') -> str:
+  """WORKDIR/{name}.md (success summary by unit, distance and overlap bin with seconds a
+  pair and the verdict's shares; one success matrix per row; the detail table) and
+  {name}.csv (one line per row x unit x distance cell). `missing`: why a row did not run,
+  by checkpoint or row name; kind: `INTROS`'s."""
   bin_labels = [distance_bin(lo, bins) for lo, _ in bins]
+  overlap_labels = [overlap_bin(lo, overlap_bins) for lo, _ in overlap_bins]
   ran = [r for r in rows if r in cells]
   pct = lambda c: tables.fmt(100 * c['success_rate'], 1) if c else '-'
-  header = ['method', 'all'] + list(sensors) + bin_labels
-  summary = [[label(r)] + [pct(cells[r].get(key)) for key in
-                           [('all', 'all')] + [(s, 'all') for s in sensors]
-                           + [('all', b) for b in bin_labels]] for r in ran]
-  summary += [[label(r), f'missing ({feature_store.missing_reason(r, missing)})']
-              for r in rows if r not in cells]
-  parts = [f'Cross-sensor registration on {description}: cloud 1 from the set\'s reference '
-           'unit, cloud 2 from the unit of each column, its standpoint in the distance bin, '
-           'at any yaw. Success (%) = RTE < 2 m and RRE < 5°.\n',
-           tables.markdown_table(header, summary)]
+
+  def share(cell, key, count):   # a verdict share (%) with its pair count
+    return f'{tables.fmt(100 * cell[key], 1)} ({cell[count]})' if cell and cell[count] else '-'
+
+  header = (['method', 'all'] + list(sensors) + bin_labels + overlap_labels
+            + ['s / pair', 'right poses trusted, % (n)', 'wrong poses refused, % (n)'])
+  summary = []
+  for r in ran:
+    everything = cells[r].get(('all', 'all'))
+    summary.append([label(r)] + [pct(cells[r].get(key)) for key in
+                                 [('all', 'all')] + [(s, 'all') for s in sensors]
+                                 + [('all', b) for b in bin_labels]
+                                 + [('overlap', o) for o in overlap_labels]]
+                   + [tables.fmt(everything['seconds'], 2) if everything else '-',
+                      share(everything, 'right_trusted', 'right'),
+                      share(everything, 'wrong_refused', 'wrong')])
+  summary += [[label(r), f'missing ({_missing(r, missing)})'] for r in rows if r not in cells]
+  parts = [INTROS[kind].format(description=description)
+           + ' Success (%) = RTE < 2 m and RRE < 5°; s / pair: wall seconds a pair, where '
+           'the row times them; the verdict columns: rows that say whether a pose is to be '
+           'trusted (`registered`).\n', tables.markdown_table(header, summary)]
   csv_rows = []
   for r in ran:
     parts.append(f'\n{label(r)}: success % (pairs) per unit of cloud 2 x distance\n')

@@ -38,11 +38,12 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   samples (`pipeline.SAMPLINGS`). Pair n's RANSAC samples are seeded with
   seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
   result holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair
-  with fewer than 3 keypoints in a cloud fails, with its `error`; a verified row's pose that
-  the scans do not fix fails with `refused`, as the register command refuses it); with
-  `log`, one JSON line per pair and row is written to it. Over several processes each
-  registers its share of the pairs (`distributed.map_items`) and every process returns
-  all results; the log is written when they are gathered.
+  with fewer than 3 keypoints in a cloud fails, with its `error`); a verified row's also
+  its verdict (`verdict.Verdict.to_json`: `registered`, the `reason` its pose is not to be
+  trusted, '' where it is, and what was measured; `pipeline.assess`). With `log`, one
+  JSON line per pair and row is written to it. Over several processes each registers its
+  share of the pairs (`distributed.map_items`) and every process returns all results; the
+  log is written when they are gathered.
   """
   if sampling not in pipeline.SAMPLINGS:
     raise errors.UserError(f'sampling must be one of {pipeline.SAMPLINGS}, got {sampling!r}')
@@ -64,7 +65,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
             candidates=feature_store.VERIFY_CANDIDATES if verify else 1,
             bev_candidates=feature_store.row_bev_candidates(row), verified=verify,
             sampling=sampling)
-        if verify:   # as the register command: refused if degenerate
+        if verify:   # the verdict, as the register command gives it
           reg = pipeline.assess(reg, prepared)
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named
@@ -76,8 +77,8 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
         res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
                    levels=reg.levels_tried,
                    **metrics.registration_errors(pair.transform, reg.transform))
-        if reg.uncertainty is not None and reg.uncertainty.free:   # no pose for the user
-          res.update(success=False, refused=reg.uncertainty.free)
+        if reg.verdict is not None:
+          res.update(reg.verdict.to_json())
       out.append(res)
       if log is not None and one_process:   # as it goes: a stopped run keeps its pairs
         log.write(json.dumps(res) + '\n')

@@ -19,28 +19,22 @@ from ssd_jax.registration import metrics, pipeline, uncertainty
 CSV_HEADER = [
     'cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials', 'seconds',
     *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)], 'rte', 'rre', 'success',
-    'error', 'degenerate', 'translation_constraint',
+    'error', 'registered', 'verdict', 'structure_fitness', 'free_space_conflict', 'degenerate',
+    'translation_constraint',
     *[f'least_fixed_translation[{i}]' for i in range(3)], 'smallest_eigenvalue',
     *[f'smallest_direction[{i}]' for i in range(6)],
     *[f'information[{i}][{j}]' for i in range(6) for j in range(6)],
     *[f'seconds_{s}' for s in pipeline.STAGES]]
 TRANSFORM_COLUMN = CSV_HEADER.index('T_12[0][0]')
 ERROR_COLUMN = CSV_HEADER.index('error')
-
-
-def refusal(reg: pipeline.Registration, allow_degenerate: bool = False) -> str:
-  """'' when the pose may be returned, else the one-line reason it is refused: the scans
-  leave part of it free (a corridor, a tunnel: `uncertainty`)."""
-  free = reg.uncertainty.free if reg.uncertainty is not None else ''
-  if free and not allow_degenerate:
-    return f'degenerate: {free}; --allow_degenerate returns the pose with this verdict'
-  return ''
+REGISTERED_COLUMN = CSV_HEADER.index('registered')
 
 
 def csv_row(result: pipeline.PairResult, truth: np.ndarray | None = None,
             error: str = '') -> list:
   """The `CSV_HEADER` row of one pair; `truth`: its ground-truth T_12 (errors filled in),
-  `error`: why its pose is not returned (else the result's own error, if any)."""
+  `error`: why its pose is not returned (else the result's own error, if any). The verdict
+  (`registered` 1 / 0 and its reason) is empty where the pair failed."""
   reg, error = result.registration, error or result.error
   t = reg.transform if reg is not None and not error else np.eye(4)
   keypoints = ((len(result.target_features.xyz), len(result.source_features.xyz))
@@ -52,10 +46,13 @@ def csv_row(result: pipeline.PairResult, truth: np.ndarray | None = None,
            *[f'{v:.6g}' for v in u.directions[0]], *[f'{v:.10g}' for v in u.information.ravel()]]
           if u is not None else [''] * 48)
   stages = reg.seconds if reg is not None else {}
+  v = reg.verdict if reg is not None and not error else None
+  verdict = ([int(v.registered), v.reason, f'{v.fitness:.4f}',
+              '' if v.conflict is None else f'{v.conflict:.4f}'] if v is not None else [''] * 4)
   return [result.target, result.source, *keypoints,
           int(reg.inliers.sum()) if reg is not None else 0, reg.trials if reg is not None else 0,
           f'{result.seconds:.3f}', *t.ravel().tolist(), gt.get('rte', ''), gt.get('rre', ''),
-          gt.get('success', ''), error, *pose,
+          gt.get('success', ''), error, *verdict, *pose,
           *[f'{stages[s]:.4f}' if s in stages else '' for s in pipeline.STAGES]]
 
 
@@ -100,6 +97,10 @@ class RegistrationsFile:
 
   def failed(self, pairs) -> list[bool]:
     return [bool(self.rows[p][ERROR_COLUMN]) for p in pairs]
+
+  def registered(self, pairs) -> list[bool]:
+    """Whether each pair's pose is to be trusted (its verdict; False where it failed)."""
+    return [str(self.rows[p][REGISTERED_COLUMN]) == '1' for p in pairs]
 
   def transforms(self, pairs) -> list[np.ndarray]:
     """T_12 of each pair (the identity where it failed)."""
@@ -186,6 +187,8 @@ def pair_json(reg: pipeline.Registration, f1: pipeline.CloudFeatures,
                      **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds}}
   if reg.verified_fitness is not None:
     out['verified_fitness'] = reg.verified_fitness.tolist()
+  out['registered'] = reg.verdict.registered
+  out['verdict'] = reg.verdict.to_json()
   out['uncertainty'] = reg.uncertainty.to_json()
   if options.icp:
     out['icp_fitness'] = reg.icp_fitness
@@ -203,7 +206,7 @@ def summary(out: dict, reg: pipeline.Registration) -> str:
            f'{out["num_keypoints"][0]} / {out["num_keypoints"][1]} keypoints, '
            f'{out["inliers"]} inliers, {out["trials"]} RANSAC trials, fitness '
            f'{reg.fitness:.3f}, inlier RMSE {reg.inlier_rmse:.3f} m, '
-           f'{out["seconds"]["total"]:.2f} s',
+           f'{out["seconds"]["total"]:.2f} s: {reg.verdict.line()}',
            'timings (s): ' + ', '.join(f'{k} {v:.2f}' for k, v in out['seconds'].items()),
            'T_12 =\n' + np.array2string(reg.transform, precision=4, suppress_small=True),
            'overlap fitness (cloud-2 points within 0.5 m of cloud 1): '

@@ -20,9 +20,11 @@ from scipy import spatial
 from ssd_jax import errors, inference
 from ssd_jax.data import clean, preprocess
 from ssd_jax.data.clean import check_cloud
-from ssd_jax.registration import bev, features, icp, keypoints as keypoints_lib, leveling
+from ssd_jax.registration import bev, features, free_space, icp, keypoints as keypoints_lib
+from ssd_jax.registration import leveling
 from ssd_jax.registration import matching
 from ssd_jax.registration import prepared, ransac, uncertainty as uncertainty_lib, verification
+from ssd_jax.registration import verdict as verdict_lib
 
 KEYPOINTS = ('auto', 'iss', 'learned', 'random')
 DESCRIPTORS = ('fpfh', 'learned')
@@ -183,6 +185,8 @@ class Registration:
   # What the scans fix of the transform (`assess`): its information matrix and the
   # directions they leave free.
   uncertainty: uncertainty_lib.PoseUncertainty | None = None
+  # Whether the transform is to be trusted, and why not (`assess`, `verdict`).
+  verdict: verdict_lib.Verdict | None = None
   levels_tried: int = 1   # `coarse_to_fine`: keypoint levels it took (2: the coarse did not do)
 
 
@@ -457,6 +461,8 @@ def verify(reg: Registration, f1: CloudFeatures, f2: CloudFeatures, points1, poi
                                                    memo=pair.memo)
       seconds['bev'] = t2 - t1
       seconds['verify'] += time.perf_counter() - t2
+  # Among them, the one that also leaves each scan's empty space empty (`free_space.best`).
+  best = free_space.best(fitness, lambda c: pair.conflict(refined[c]))
   xyz1 = f1.xyz[reg.matches[:, 0]].astype(np.float64)
   xyz2 = f2.xyz[reg.matches[:, 1]].astype(np.float64)
   inliers, stats = _match_stats(xyz1, xyz2, refined[best], inlier_threshold)
@@ -508,15 +514,20 @@ def coarse_to_fine(levels1: Sequence[Callable[[], CloudFeatures]],
 
 def assess(reg: Registration, points1, points2=None, origin: np.ndarray | None = None
            ) -> Registration:
-  """`reg` with its `uncertainty` at its transform (`uncertainty.assess`): points1, points2
-  as for `verify`; `origin` [3]: cloud 1's frame origin in their coordinates (default 0).
-  Uses the verification's candidates where `reg` was verified."""
+  """`reg` with its `uncertainty` at its transform (`uncertainty.assess`) and its
+  `verdict` (`verdict.assess`): points1, points2 as for `verify`; `origin` [3]: cloud 1's
+  frame origin in their coordinates (default 0; free space is judged only where it is 0,
+  the clouds in their sensors' frames). Uses the verification's candidates where `reg`
+  was verified."""
   t0 = time.perf_counter()
   pair = prepared.prepare_pair(points1, points2)
   cloud1, cloud2 = pair.cloud1, pair.cloud2
   assessed = uncertainty_lib.assess(cloud1.target, cloud2.source.points, reg.transform,
                                     reg.verified_poses, reg.verified_fitness, origin)
-  return dataclasses.replace(reg, uncertainty=assessed,
+  judged = verdict_lib.assess(pair, reg.transform, assessed.free, reg.verified_poses,
+                              reg.verified_fitness,
+                              judge_free_space=origin is None or not np.any(origin))
+  return dataclasses.replace(reg, uncertainty=assessed, verdict=judged,
                              seconds={**reg.seconds, 'assess': time.perf_counter() - t0})
 
 

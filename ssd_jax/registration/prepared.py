@@ -16,13 +16,13 @@ import functools
 
 import numpy as np
 
-from ssd_jax.registration import bev, icp, verification
+from ssd_jax.registration import bev, free_space, icp, verification
 
 
 class PreparedCloud:
   """points [N, 3] metres (float64, z up), with `footprint` (`bev.footprint`), `target`
-  (`verification.target`: as cloud 1) and `source` (`verification.source`: as cloud 2)
-  made on first use."""
+  (`verification.target`: as cloud 1), `source` (`verification.source`: as cloud 2) and
+  `range_image` (`free_space`) made on first use."""
 
   def __init__(self, points: np.ndarray):
     self.points = np.asarray(points, np.float64)
@@ -42,6 +42,14 @@ class PreparedCloud:
   def source(self) -> verification.Source:
     return verification.source(self.points)
 
+  @functools.cached_property
+  def range_image(self) -> free_space.RangeImage | None:
+    """Its nearest return per direction (`free_space.range_image`), None where it is no
+    scan in its sensor's frame (`free_space.sensor_centred`)."""
+    if not free_space.sensor_centred(self.points):
+      return None
+    return free_space.range_image(self.points)
+
 
 def prepare(points) -> PreparedCloud:
   """points [N, 3] or a `PreparedCloud` (returned as it is)."""
@@ -58,6 +66,18 @@ class PreparedPair:
   def __init__(self, cloud1, cloud2, memo: dict | None = None):
     self.cloud1, self.cloud2 = prepare(cloud1), prepare(cloud2)
     self.memo = {} if memo is None else memo
+
+  def conflict(self, transform: np.ndarray) -> float | None:
+    """`free_space.conflict` of the clouds' structure under T_12, kept per pose; None
+    where either cloud is no scan in its sensor's frame."""
+    images = self.cloud1.range_image, self.cloud2.range_image
+    if images[0] is None or images[1] is None:
+      return None
+    key = ('conflict', np.asarray(transform, np.float64).tobytes())
+    if key not in self.memo:
+      self.memo[key] = free_space.conflict(*images, self.cloud1.source.scored,
+                                           self.cloud2.source.scored, transform)
+    return self.memo[key]
 
   def bev_poses(self, k: int) -> np.ndarray:
     """The k best T_12 [k, 4, 4] of `bev.search` on the two footprints."""

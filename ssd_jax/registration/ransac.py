@@ -372,6 +372,15 @@ CANDIDATE_SEPARATION = (2.0, 5.0)
 CANDIDATE_MIN_TRIALS = 1000
 
 
+def same_pose(a: np.ndarray, b: np.ndarray,
+              separation: tuple[float, float] = CANDIDATE_SEPARATION) -> bool:
+  """Whether two poses [4, 4] are one candidate: closer than `separation` (metres of
+  translation and degrees of rotation) in both."""
+  cos = (np.sum(a[:3, :3] * b[:3, :3]) - 1.0) / 2.0
+  return bool(np.linalg.norm(a[:3, 3] - b[:3, 3]) < separation[0]
+              and np.clip(cos, -1.0, 1.0) > np.cos(np.deg2rad(separation[1])))
+
+
 def distinct_best(transforms: np.ndarray, scores: np.ndarray, k: int,
                   separation: tuple[float, float] = CANDIDATE_SEPARATION) -> list[int]:
   """Indices of up to k hypotheses [T, 4, 4], best score [T] first (earliest on ties),

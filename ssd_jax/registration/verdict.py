@@ -1,0 +1,109 @@
+"""Whether a registered pose is to be trusted: `registered` true or false, with the reason.
+
+Every registration returns a pose; many real pairs (scans far apart, half overlapping, a
+solid-state unit facing elsewhere) have no right one to find, and a wrong pose looks like
+a right one by its fitness alone: the ground fits every upright pose. The verdict reads
+four things of the final pose, each a reason to refuse it:
+
+  * 'degenerate': the scans leave part of the pose free (a corridor, a tunnel:
+    `uncertainty.PoseUncertainty.free`);
+  * 'free-space conflict': more than MAX_CONFLICT of one scan's structure lies where the
+    other scan's laser passed through (`free_space.conflict`). Right poses on the
+    development drives conflict 0.005-0.08 outdoors (moving cars and people; up to 0.14
+    indoors among people), wrong ones 0.12-0.5;
+  * 'low overlap': under MIN_FITNESS of cloud 2's structure lies within
+    `verification.FIT_DISTANCE` of cloud 1: too little is shared for the pose to rest on;
+  * 'ambiguous candidates': a distinct pose (`ransac.CANDIDATE_SEPARATION` away) that also
+    passes the free-space check fits within AMBIGUOUS_MARGIN of the best.
+
+Thresholds are round numbers between the right and the wrong poses' values on the
+development drives (docs/notes/real_drives.md: the verdict, with its precision and recall);
+free space is judged only where both scans are in their sensors' frames
+(`free_space.sensor_centred`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ssd_jax.registration import prepared, ransac, verification
+
+MAX_CONFLICT = 0.1
+# Right poses 20-30 m apart on a real road lay 0.16-0.17 of cloud 2's structure on cloud 1.
+MIN_FITNESS = 0.15
+AMBIGUOUS_MARGIN = 0.05
+REASONS = ('degenerate', 'free-space conflict', 'low overlap', 'ambiguous candidates')
+
+
+@dataclasses.dataclass(frozen=True)
+class Verdict:
+  """The verdict on one pose. fitness: share of cloud 2's structure within FIT_DISTANCE of
+  cloud 1; conflict: `free_space.conflict` (None where not judged); runner_up: the
+  fitness of the best distinct candidate that passes the free-space check, where one fits
+  within AMBIGUOUS_MARGIN of the chosen pose (else None)."""
+  registered: bool
+  reason: str            # '' where registered, else REASONS[k] + ': ' + what was measured
+  fitness: float
+  conflict: float | None = None
+  runner_up: float | None = None
+
+  @property
+  def kind(self) -> str:
+    """The reason's name (`REASONS`), '' where registered."""
+    return self.reason.split(':')[0]
+
+  def to_json(self) -> dict:
+    return {'registered': self.registered, 'reason': self.reason, 'fitness': self.fitness,
+            'free_space_conflict': self.conflict, 'runner_up_fitness': self.runner_up}
+
+  def line(self) -> str:
+    """'registered' or 'NOT registered (reason)', for the one-line summaries."""
+    return 'registered' if self.registered else f'NOT registered ({self.reason})'
+
+
+def judge(fitness: float, conflict: float | None, free: str = '',
+          runner_up: float | None = None) -> Verdict:
+  """The `Verdict` on a pose from what was measured at it: fitness, conflict (None where
+  free space was not judged), free (the uncertainty's line, '' where the scans fix the
+  pose) and runner_up (the fitness of the best distinct candidate that passes the
+  free-space check, None where there is none)."""
+  reason = ''
+  if free:
+    reason = f'degenerate: {free}'
+  elif conflict is not None and conflict > MAX_CONFLICT:
+    reason = (f"free-space conflict: {conflict:.0%} of a scan's structure lies where the "
+              f"other's rays passed (over {MAX_CONFLICT:.0%})")
+  elif fitness < MIN_FITNESS:
+    reason = (f"low overlap: {fitness:.0%} of cloud 2's structure lies on cloud 1 (under "
+              f'{MIN_FITNESS:.0%})')
+  elif runner_up is not None and runner_up >= fitness - AMBIGUOUS_MARGIN:
+    reason = (f'ambiguous candidates: a distinct pose fits {runner_up:.2f} against the '
+              f'chosen {fitness:.2f}')
+  return Verdict(not reason, reason, float(fitness), conflict, runner_up)
+
+
+def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
+           candidates: np.ndarray | None = None,
+           candidate_fitness: np.ndarray | None = None, judge_free_space: bool = True
+           ) -> Verdict:
+  """The `Verdict` on T_12 [4, 4] of the clouds of `pair` (in their own frames); free as
+  for `judge`; candidates [k, 4, 4] with their fitness [k]: the verification's poses
+  (`verification.verify`), of which only those distinct from T_12 that fit within
+  AMBIGUOUS_MARGIN of it are checked for free space; judge_free_space False: the clouds'
+  origins are not their sensors' (no free-space check)."""
+  conflict = pair.conflict if judge_free_space else lambda t: None
+  fitness = verification.fitness(pair.cloud1.target, pair.cloud2.source.scored, transform)
+  runner_up = None
+  if candidates is not None:
+    for c in np.argsort(-np.asarray(candidate_fitness), kind='stable'):
+      if ransac.same_pose(candidates[c], transform):
+        continue
+      if candidate_fitness[c] < fitness - AMBIGUOUS_MARGIN:
+        break
+      other = conflict(candidates[c])
+      if other is None or other <= MAX_CONFLICT:
+        runner_up = float(candidate_fitness[c])
+        break
+  return judge(fitness, conflict(transform), free, runner_up)

@@ -1,0 +1,70 @@
+"""Pairs of real drives' own scans (`data.real_drives`, `make_real_pairs --drives`) and
+their evaluation (configs/evals/real_drives.py)."""
+
+import numpy as np
+import pytest
+
+from ssd_jax.configs.evals import real_drives as real_drives_config
+from ssd_jax.data import clean, io, real_drives, registration_sets
+from ssd_jax.evaluation import evaluators
+from tests.conftest import shared_path
+
+
+def test_pairs_are_spread_over_each_bin_and_skip_unusable_ones():
+  # Scans on a line 1 m apart: pairs 2-5 m apart are (i, i + 2..4).
+  poses = np.tile(np.eye(4), (12, 1, 1))
+  poses[:, 0, 3] = np.arange(12.0)
+  pairs = real_drives.choose_pairs(poses, [(2.0, 5.0)], 3)
+  assert [p[2] for p in pairs] == ['2-5 m'] * 3
+  gaps = [j - i for i, j, _ in pairs]
+  assert gaps[0] == 2 and gaps[-1] >= 3, pairs        # the nearest first, farther ones after
+  # An unusable pair is replaced by the next one in distance order.
+  skip = pairs[0][:2]
+  again = real_drives.choose_pairs(poses, [(2.0, 5.0)], 3, usable=lambda i, j: (i, j) != skip)
+  assert skip not in [p[:2] for p in again] and len(again) == 3
+  # 0-2 m: only pairs turned at least min_rotation_deg apart.
+  assert real_drives.choose_pairs(poses, [(0.0, 2.0)], 3, min_rotation_deg=20.0) == []
+
+
+def test_a_drive_folder_is_checked(tmp_path):
+  (tmp_path / 'scans').mkdir()
+  with pytest.raises(io.CloudFileError, match='no scans'):
+    real_drives.read_drive(tmp_path / 'none')
+  np.zeros((10, 4), np.float32).tofile(tmp_path / 'scans' / '000000.bin')
+  with pytest.raises(io.CloudFileError, match='poses.txt'):
+    real_drives.read_drive(tmp_path)
+  (tmp_path / 'poses.txt').write_text('1 0 0 0 0 1 0 0 0 0 1 0\n' * 2)
+  with pytest.raises(io.CloudFileError, match='1 scans but 2 poses'):
+    real_drives.read_drive(tmp_path)
+
+
+@pytest.mark.real_data
+@pytest.mark.slow
+def test_a_real_drive_set_and_its_evaluation(tmp_path):
+  """Two pairs of a real drive, as driven and turned: their T_12 lays scan j on scan i
+  (the overlap pairs.tsv names, the same for the turned copy), and the real-drives
+  evaluation's table gives success by distance and overlap with the verdict's columns."""
+  drive = shared_path('real_drives', 'kitti00')
+  out = tmp_path / 'set'
+  rows = real_drives.make_set([drive], out, [(2.0, 5.0)], per_bin=1)
+  assert len(rows) == 2 and rows[1]['source'].endswith('turned')
+  pairs = registration_sets.read_registration_set(out)
+  info = registration_sets.read_pair_info(out)
+  for pair in pairs:
+    a = clean.clean_cloud(io.read_cloud(pair.cloud1), '', np.float64)
+    b = clean.clean_cloud(io.read_cloud(pair.cloud2), '', np.float64)
+    meta = info[pair.idx1, pair.idx2]
+    assert meta['overlap'] == pytest.approx(real_drives.overlap(a, b, pair.transform), abs=1e-3)
+    assert meta['overlap'] > 0.7 and 2.0 <= meta['distance_m'] < 5.0
+  assert abs(info[pairs[1].idx1, pairs[1].idx2]['yaw_deg']) > 130   # turned ~180 degrees
+  config = real_drives_config.get_config()
+  del config.evals.livox
+  config.evals.drives.dataset = str(out)
+  config.evals.drives.rows = ('register', 'bev')
+  config.checkpoints = {'ours': 'ours'}
+  report, text = evaluators.evaluate(config, tmp_path / 'eval', log=lambda s: None)
+  assert 'right poses trusted, % (n)' in text and 'overlap 0.7-1' in text
+  summary = [l for l in text.splitlines() if l.startswith('| register defaults, ours')][0]
+  cells = [c.strip() for c in summary.split('|')[1:-1]]
+  assert cells[1] == '100.0', summary   # both pairs (2.6 m apart, 0.89 overlap)
+  assert cells[-2] == '100.0 (2)' and cells[-1] == '-', summary

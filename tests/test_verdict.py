@@ -1,0 +1,115 @@
+"""Free-space consistency and the verdict on a pose (`registered` with its reason)."""
+
+import numpy as np
+import pytest
+
+from ssd_jax.data import clean, groundtruth, io, kitti
+from ssd_jax.registration import free_space, metrics, pipeline, prepared, verdict
+from tests.conftest import shared_path
+
+
+def _drive_pair(i, j):
+  folder = shared_path('real_drives', 'kaist03')
+  poses = kitti.read_poses(folder / 'poses.txt')
+  read = lambda n: clean.clean_cloud(io.read_cloud(folder / 'scans' / f'{n:06d}.bin'), '',
+                                     np.float64)
+  return read(i), read(j), groundtruth.relative_pose(poses, i, j)
+
+
+@pytest.mark.real_data
+def test_a_pose_shifted_along_the_street_puts_structure_in_the_other_scans_free_space():
+  """Two real scans 7.8 m apart: under the drive's pose few of either's structure points
+  lie where the other's rays passed; shifted back to the same spot (the wrong pose a
+  repeated street gives), many do."""
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  pair = prepared.PreparedPair(cloud1, cloud2)
+  assert pair.cloud1.range_image is not None and pair.cloud2.range_image is not None
+  right = pair.conflict(t12)
+  shifted = t12.copy()
+  shifted[:3, 3] = 0.0
+  wrong = pair.conflict(shifted)
+  assert right < 0.03 and wrong > 1.5 * verdict.MAX_CONFLICT, (right, wrong)
+  # Cached per pose, and the same from a fresh pair (deterministic).
+  assert pair.conflict(shifted) == wrong == prepared.PreparedPair(cloud1, cloud2).conflict(shifted)
+  # The verification's pick among the two: the right one, though it fits less.
+  assert free_space.best(np.array([0.5, 0.45]), lambda c: (wrong, right)[c]) == 1
+  assert free_space.best(np.array([0.5, 0.45]), lambda c: None) == 0
+
+
+@pytest.mark.real_data
+def test_only_scans_in_their_sensors_frames_are_judged():
+  cloud1, _, _ = _drive_pair(0, 7)
+  assert free_space.sensor_centred(cloud1)
+  # Map coordinates: the origin kilometres away.
+  assert not free_space.sensor_centred(cloud1 + [4.5e5, 5.4e6, 30.0])
+  # A map tile or submap centred on its points: its ground runs under the origin.
+  ground = np.stack(np.meshgrid(np.arange(-5, 5, 0.1), np.arange(-5, 5, 0.1)), -1).reshape(-1, 2)
+  tile = np.concatenate([cloud1, np.c_[ground, np.full(len(ground), -1.8)]])
+  assert not free_space.sensor_centred(tile)
+  assert prepared.PreparedPair(tile, cloud1).conflict(np.eye(4)) is None
+
+
+def test_a_range_image_keeps_the_nearest_return_per_direction():
+  wall = np.stack([np.full(200, 10.0), np.linspace(-2, 2, 200), np.linspace(-1, 1, 200)], 1)
+  behind = wall * 2.0       # the same directions, twice as far
+  image = free_space.range_image(np.concatenate([wall, behind]))
+  e, a, r = image.cells(wall)
+  np.testing.assert_allclose(image.nearest[e, a], r, rtol=0.02)
+  # A point 5 m in front of the wall conflicts; one behind it or 0.5 m before it does not;
+  # one nearer the sensor than MIN_JUDGED_RANGE or beyond its farthest return is not judged.
+  probe = np.array([[5.0, 0.0, 0.0], [15.0, 0.0, 0.0], [9.5, 0.0, 0.0], [2.0, 0.0, 0.0],
+                    [30.0, 0.0, 0.0]])
+  assert free_space.conflicts(image, probe) == (1, 3)
+
+
+def test_each_reason_of_the_verdict():
+  ok = verdict.judge(0.6, 0.02)
+  assert ok.registered and ok.reason == '' and ok.line() == 'registered'
+  cases = {'degenerate': dict(fitness=0.9, conflict=0.0, free='translation along x'),
+           'free-space conflict': dict(fitness=0.9, conflict=0.3),
+           'low overlap': dict(fitness=0.1, conflict=0.0),
+           'ambiguous candidates': dict(fitness=0.4, conflict=0.0, runner_up=0.38)}
+  for kind, kwargs in cases.items():
+    v = verdict.judge(**kwargs)
+    assert not v.registered and v.kind == kind and v.reason.startswith(kind + ': '), v
+    assert v.line() == f'NOT registered ({v.reason})'
+  # Not judged for free space (None): the other reasons alone.
+  assert verdict.judge(0.6, None).registered
+  assert verdict.judge(0.6, 0.02, runner_up=0.5).registered   # a runner-up clearly behind
+  assert set(verdict.REASONS) == set(cases)
+  assert verdict.judge(0.6, 0.02).to_json() == {
+      'registered': True, 'reason': '', 'fitness': 0.6, 'free_space_conflict': 0.02,
+      'runner_up_fitness': None}
+
+
+@pytest.mark.real_data
+def test_the_verdict_on_a_right_and_a_wrong_pose_of_real_scans():
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  pair = prepared.PreparedPair(cloud1, cloud2)
+  right = verdict.assess(pair, t12)
+  assert right.registered, right
+  wrong = t12.copy()
+  wrong[:3, 3] += [6.0, 0.0, 0.0]
+  judged = verdict.assess(pair, wrong)
+  assert not judged.registered and judged.kind in ('free-space conflict', 'low overlap'), judged
+  # Without the free-space check (clouds off their sensors' frames) the other reasons hold.
+  assert verdict.assess(pair, t12, judge_free_space=False).conflict is None
+  # The right pose as a distinct candidate fitting as well: ambiguous.
+  twin = t12.copy()
+  twin[:3, 3] += [0.0, 0.0, 3.0]   # 3 m off: a distinct candidate
+  amb = verdict.assess(pair, t12, candidates=np.stack([t12, twin]),
+                       candidate_fitness=np.array([right.fitness, right.fitness]))
+  assert amb.runner_up is None or not amb.registered
+
+
+
+@pytest.mark.real_data
+def test_register_returns_the_verdict_with_the_pose():
+  """The Python API: `pipeline.register` gives the verdict with the pose (FPFH, the
+  defaults otherwise), registered for two real scans 7.8 m apart."""
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  reg, _, _ = pipeline.register(target=cloud1, source=cloud2,
+                                options=pipeline.Options(descriptor='fpfh'))
+  assert metrics.registration_errors(t12, reg.transform)['success']
+  assert reg.verdict.registered and reg.verdict.conflict is not None, reg.verdict
+  assert reg.verdict.fitness >= verdict.MIN_FITNESS
