@@ -100,12 +100,11 @@ def _batch(options: pipeline.Options, model, model_name: str) -> None:
                                    say=tqdm.tqdm.write if _show_progress() else print)
   for result in tqdm.tqdm(results, total=len(todo), desc='registration', unit='pair',
                           disable=not _show_progress()):
-    error = result.error
-    if error and FLAGS.stop_on_error:
-      raise errors.UserError(f'{result.target} / {result.source}: {error}')
+    if result.error and FLAGS.stop_on_error:
+      raise errors.UserError(f'{result.target} / {result.source}: {result.error}')
     t_gt = (outputs.ground_truth(FLAGS.groundtruth, result.target, result.source, False, truth)
-            if truth is not None and not error else None)
-    written.add(result, t_gt, error)
+            if truth is not None and not result.error else None)
+    written.add(result, t_gt)
   failed = written.failed(pairs)
   registered = written.registered(pairs)
   print(f'wrote {written.path}: {len(pairs)} pairs'

@@ -87,8 +87,7 @@ def register_clouds(pairs: Sequence, store: feature_store.FeatureStore,
     try:
       t, stats = _register_clouds(row, store, pair, seed * 1_000_003 + n)
     except ValueError as e:
-      res.update(trials=0, inliers=0, matches=0, rte=float('inf'), rre=float('inf'),
-                 rre_geodesic=float('inf'), success=False, error=str(e))
+      res.update(registration.failed(str(e)))
     else:
       res.update(trials=0, inliers=stats['inliers'], matches=stats['matches'],
                  seconds=time.perf_counter() - t0,
@@ -121,8 +120,7 @@ def register_command(pairs: Sequence, row: str, model, *, log: TextIO | None = N
     res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2,
            'seconds': r.seconds}
     if r.error:
-      res.update(trials=0, inliers=0, matches=0, rte=float('inf'), rre=float('inf'),
-                 rre_geodesic=float('inf'), success=False, error=r.error)
+      res.update(registration.failed(r.error))
     else:
       reg = r.registration
       res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),

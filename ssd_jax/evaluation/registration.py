@@ -27,6 +27,12 @@ def summarize(results: list[dict]) -> dict[str, float]:
           'trials': mean('trials', results)}
 
 
+def failed(error: str) -> dict:
+  """The result fields of a pair a row could not register (`error`: why, one line)."""
+  return {'trials': 0, 'inliers': 0, 'matches': 0, 'rte': float('inf'), 'rre': float('inf'),
+          'rre_geodesic': float('inf'), 'success': False, 'error': error}
+
+
 def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.FeatureStore, *,
                    seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
                    max_trials: int = 10_000, log: TextIO | None = None,
@@ -71,8 +77,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
         raise   # a damaged test file stops the benchmark, named
       except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,
         # flat): a failed pair, not a failed benchmark
-        res.update(trials=0, inliers=0, matches=0, rte=float('inf'), rre=float('inf'),
-                   rre_geodesic=float('inf'), success=False, error=str(e))
+        res.update(failed(str(e)))
       else:
         res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
                    levels=reg.levels_tried,

@@ -27,6 +27,8 @@ from typing import Callable
 
 import numpy as np
 
+from ssd_jax.data import preprocess
+
 AZIMUTH_STEP_DEG = 1.0
 ELEVATION_STEP_DEG = 1.0
 # Metres: a point conflicts when the ray through it went on at least this much farther,
@@ -126,10 +128,6 @@ def best(fitness: np.ndarray, conflict: Callable[[int], float | None]) -> int:
   return int(np.argmax(scores))
 
 
-def _even(points: np.ndarray, count: int) -> np.ndarray:
-  return points[::max(1, -(-len(points) // count))]
-
-
 def conflict(image1: RangeImage, image2: RangeImage, points1: np.ndarray, points2: np.ndarray,
              transform: np.ndarray) -> float:
   """The larger share, over both directions, of one scan's points [M, 3] (its structure,
@@ -139,7 +137,7 @@ def conflict(image1: RangeImage, image2: RangeImage, points1: np.ndarray, points
   inverse = np.linalg.inv(t)
   shares = []
   for image, pts, pose in ((image1, points2, t), (image2, points1, inverse)):
-    pts = _even(np.asarray(pts, np.float64), TEST_POINTS)
+    pts = np.asarray(pts, np.float64)[::preprocess.even_stride(len(pts), TEST_POINTS)]
     bad, judged = conflicts(image, pts @ pose[:3, :3].T + pose[:3, 3])
     shares.append(bad / judged if judged else 0.0)
   return float(max(shares))

@@ -30,12 +30,10 @@ ERROR_COLUMN = CSV_HEADER.index('error')
 REGISTERED_COLUMN = CSV_HEADER.index('registered')
 
 
-def csv_row(result: pipeline.PairResult, truth: np.ndarray | None = None,
-            error: str = '') -> list:
-  """The `CSV_HEADER` row of one pair; `truth`: its ground-truth T_12 (errors filled in),
-  `error`: why its pose is not returned (else the result's own error, if any). The verdict
-  (`registered` 1 / 0 and its reason) is empty where the pair failed."""
-  reg, error = result.registration, error or result.error
+def csv_row(result: pipeline.PairResult, truth: np.ndarray | None = None) -> list:
+  """The `CSV_HEADER` row of one pair; `truth`: its ground-truth T_12 (errors filled in).
+  The verdict (`registered` 1 / 0 and its reason) is empty where the pair failed."""
+  reg, error = result.registration, result.error
   t = reg.transform if reg is not None and not error else np.eye(4)
   keypoints = ((len(result.target_features.xyz), len(result.source_features.xyz))
                if reg is not None else (0, 0))
@@ -88,10 +86,9 @@ class RegistrationsFile:
       csv.writer(f).writerows([CSV_HEADER, *self.rows.values()])
     os.replace(path + '.tmp', path)
 
-  def add(self, result: pipeline.PairResult, truth: np.ndarray | None = None,
-          error: str = '') -> None:
+  def add(self, result: pipeline.PairResult, truth: np.ndarray | None = None) -> None:
     """Append the pair's `csv_row`."""
-    row = self.rows[result.target, result.source] = csv_row(result, truth, error)
+    row = self.rows[result.target, result.source] = csv_row(result, truth)
     with open(self.path, 'a', newline='') as f:
       csv.writer(f).writerow(row)
 
