@@ -9,19 +9,23 @@ fine-tune on them, then export the model with a model card.
 
 The scans (.bin/.npy/.ply/.pcd/.las/.laz, one sweep each, centred on the sensor, z up)
 are read in name order as a drive. `--pairs=auto` first mines pairs of them
-(`experiments.mine`: the classical registration, kept where its poses close loops; no
-pose is read) into OUT/mined_pairs.csv, then trains the paper's objective with half of
-each batch's second branches a real second scan moved by the mined transform (two-view
-training, `datasets.MinedPairDataset`) and half the paper's turned copy. Where no pair
-passes (scans not in capture order), and with `--pairs=none`, it trains the paper's
-single-scan objective alone. Last, with `--keypoints=auto`, the adapted model's
-descriptor alone registers 32 pairs farther apart than the miner reached (each two kept
-pairs chained) twice, its keypoints sampled from all points and from the structure above
-the ground, and the export keeps the domain that registers more
+(`experiments.mine`: the classical registration, kept where the verdict trusts its poses
+and they close loops; no pose is read; a long drive thinned to `mining.max_scans` scans)
+into OUT/mined_pairs.csv, then trains the paper's objective with half of each batch's
+second branches a real second scan moved by the mined transform (two-view training,
+`datasets.MinedPairDataset`) and half the paper's turned copy. Then it widens, as EYOC
+does (`mining.widen_rounds` times): the model trained so far mines the next two doubled
+gaps, farther than the classical teacher reached, under the same gate, and training goes
+on with every kept pair (the steps split evenly between the rounds, one learning-rate
+schedule). Where no pair passes (scans not in capture order), and with `--pairs=none`,
+it trains the paper's single-scan objective alone. Last, with `--keypoints=auto`, the
+adapted model's descriptor alone registers 32 pairs farther apart than the miner reached
+(each two kept pairs chained) twice, its keypoints sampled from all points and from the
+structure above the ground, and the export keeps the domain that registers more
 (`registration.keypoint_choice`; 'structure' where the sensor's ground rings mislead its
-matches). OUT/run holds the training run (rerun the command to resume it, mining too);
-OUT holds the exported model (config.json, weights.msgpack) and MODEL_CARD.md (base
-model, scans, pairs, steps, keypoints, wall time, machine, command).
+matches). OUT/run holds the training run (rerun the command to resume it, mining too); OUT
+holds the exported model (config.json, weights.msgpack) and MODEL_CARD.md (base model,
+scans, pairs, steps, keypoints, wall time, machine, command).
 docs/notes/benchmarks.md times it on 2 CPU cores.
 """
 
@@ -88,27 +92,62 @@ PAIRS_OBJECTIVE = ("the paper's self-supervision with {rate:.0%} of the second b
                    'miner found (two-view training); the rest a turned copy of the scan.')
 
 
-def _pairs(scans: list[str]) -> tuple[str, str]:
-  """The miner's CSV to train on ('' for none) and the model card's line about it."""
-  if FLAGS.pairs == 'none':
-    return '', 'none (`--pairs=none`)'
-  path = FLAGS.pairs
-  if FLAGS.pairs == 'auto':
-    os.makedirs(FLAGS.out, exist_ok=True)
-    path = os.path.join(FLAGS.out, 'mined_pairs.csv')
-    with tqdm.tqdm(total=len(mining.candidate_pairs(len(scans))), desc='mining pairs',
-                   unit='pair') as bar:
-      pairs = mining.mine_to_file(path, scans, functools.partial(clean.read_metres, fmt='auto'),
-                                  progress=bar.update, say=bar.write,
-                                  workers=mining.DEFAULT_WORKERS)
-      bar.total = bar.n   # the total counted every gap; mining stops at the first that fails
-      bar.refresh()
-    if not any(p.kept for p in pairs):
-      print(f'no pair of {FLAGS.scans} passed the miner\'s gate (are the scans in capture '
-            "order?): training the paper's single-scan objective alone")
-      return '', f'none of {len(pairs)} candidates passed the gate'
+def _mine(path: str, scans: list[str], gaps: tuple[int, ...], model=None, desc='mining pairs'
+          ) -> list[mined_pairs.MinedPair]:
+  """Every pair of the miner's CSV at `path` after mining `gaps` of `scans` into it (with
+  the classical teacher, or `model`)."""
+  with tqdm.tqdm(total=len(mining.candidate_pairs(len(scans), gaps)), desc=desc,
+                 unit='pair') as bar:
+    pairs = mining.mine_to_file(path, scans, functools.partial(clean.read_metres, fmt='auto'),
+                                gaps=gaps, model=model, progress=bar.update, say=bar.write,
+                                workers=mining.DEFAULT_WORKERS)
+    bar.total = bar.n   # the total counted every gap; mining stops at the first that fails
+    bar.refresh()
+  return pairs
+
+
+def _pairs(scans: list[str]) -> str:
+  """The miner's CSV to train on ('' for none), mined first with `--pairs=auto`."""
+  if FLAGS.pairs != 'auto':
+    return '' if FLAGS.pairs == 'none' else FLAGS.pairs
+  os.makedirs(FLAGS.out, exist_ok=True)
+  path = os.path.join(FLAGS.out, 'mined_pairs.csv')
+  pairs = _mine(path, scans, mining.DEFAULT_GAPS)
+  if not any(p.kept for p in pairs):
+    print(f'no pair of {FLAGS.scans} passed the miner\'s gate (are the scans in capture '
+          "order?): training the paper's single-scan objective alone")
+    return ''
+  return path
+
+
+def _train(config, run_dir: str, scans: list[str]) -> list[tuple[int, ...]]:
+  """Trains `config` in `run_dir`; with pairs mined here (`--pairs=auto`), the model
+  trained so far widens them between its rounds. -> the gaps each round mined."""
+  widening = FLAGS.pairs == 'auto' and bool(config.data.pairs)
+  gaps = [mining.DEFAULT_GAPS] if widening else []
+  rounds = config.mining.widen_rounds + 1 if widening else 1
+  for r in range(1, rounds):
+    train.train_and_evaluate(config, run_dir, until=config.train.num_steps * r // rounds)
+    wider = mining.widened_gaps([p for p in mined_pairs.PairsFile(config.data.pairs).done
+                                 .values() if p.gap <= max(gaps[-1])])
+    if not wider:
+      break
+    gaps.append(wider)
+    _mine(config.data.pairs, scans, wider, pretrained.load(run_dir),
+          f'widening: gaps {", ".join(map(str, wider))}')
+  train.train_and_evaluate(config, run_dir)
+  return gaps
+
+
+def _pairs_line(path: str, gaps: list[tuple[int, ...]]) -> str:
+  """The model card's line about the mined pairs trained on."""
+  if not path:
+    return 'none (`--pairs=none`)' if FLAGS.pairs == 'none' else 'none passed the gate'
   kept = mined_pairs.read_kept(path)
-  return path, f'{len(kept)} (`{path}`)'
+  rounds = '; '.join(f'{"classical teacher" if r == 0 else f"widening {r}, the model"}, '
+                     f'gaps {",".join(map(str, g))}: {sum(p.gap in g for p in kept)}'
+                     for r, g in enumerate(gaps))
+  return f'{len(kept)} (`{path}`)' + (f' ({rounds})' if rounds else '')
 
 
 def _keypoints(run_dir: str, pairs_csv: str) -> tuple[str, str]:
@@ -138,14 +177,18 @@ def main(argv):
   if FLAGS.steps is not None:
     config.train.num_steps = FLAGS.steps
   run_dir = os.path.join(FLAGS.out, 'run')
+  if config.mining.widen_rounds < 0:
+    raise SystemExit(f'error: --config.mining.widen_rounds must be 0 or more, got '
+                     f'{config.mining.widen_rounds}')
   try:
     scans = [str(p) for p in io.list_clouds(FLAGS.scans)]
     num_scans = len(scans)
+    mined = mining.spread(scans, config.mining.max_scans)
     start = time.perf_counter()
-    config.data.pairs, pairs_line = _pairs(scans)
+    config.data.pairs = _pairs(mined)
     objective = (PAIRS_OBJECTIVE.format(rate=config.data.pairs_rate) if config.data.pairs
                  else SINGLE_OBJECTIVE)
-    train.train_and_evaluate(config, run_dir)
+    pairs_line = _pairs_line(config.data.pairs, _train(config, run_dir, mined))
     keypoints, keypoints_line = _keypoints(run_dir, config.data.pairs)
     minutes = (time.perf_counter() - start) / 60
     card = CARD.format(

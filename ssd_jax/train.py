@@ -244,8 +244,10 @@ def triplet_dataset(config: ml_collections.ConfigDict) -> datasets.TripletDatase
                                  min_points=config.data.min_points)
 
 
-def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> TrainState:
-  """Train (or resume) `config` in `workdir`; returns the final state.
+def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str,
+                       until: int | None = None) -> TrainState:
+  """Train (or resume) `config` in `workdir` up to step `until` (default, and at most,
+  `train.num_steps`: the schedules keep their length); returns the final state.
 
   Writes `workdir/metrics.jsonl` and `workdir/checkpoints/`. Rerunning with the
   same workdir resumes from the latest checkpoint and continues the identical
@@ -295,6 +297,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
     state = replicate(initialize_from(jax.device_get(state), t_cfg.init_from, config), mesh)
     logging.info('%s initialised from %s', t_cfg.init_scope, t_cfg.init_from)
   start = int(state.step)
+  until = t_cfg.num_steps if until is None else min(until, t_cfg.num_steps)
   writer = MetricsWriter(os.path.join(workdir, 'metrics.jsonl'), start, distributed.is_main())
   step_fn = jit_train_step(config, mesh)
   # The evaluation key is made inside the jitted function: with several processes an
@@ -323,18 +326,18 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str) -> Train
   rows = distributed.local_rows(t_cfg.batch_size)
   make_batch = lambda step: dataset.batch(config.seed, step, t_cfg.batch_size,
                                           config.data.num_points, rows)
-  batches = datasets.prefetch(make_batch, range(start, t_cfg.num_steps), config.data.prefetch)
-  bar = tqdm.tqdm(total=t_cfg.num_steps, initial=start, desc='train', unit='step',
+  batches = datasets.prefetch(make_batch, range(start, until), config.data.prefetch)
+  bar = tqdm.tqdm(total=until, initial=start, desc='train', unit='step',
                   dynamic_ncols=True, disable=not (config.progress_bar and distributed.is_main()))
   pending: list[tuple[int, dict]] = []
   t_last, steps_since = time.perf_counter(), 0
   try:
-    for step, points in zip(range(start, t_cfg.num_steps), batches):
+    for step, points in zip(range(start, until), batches):
       state, metrics = step_fn(state, shard_batch(points, mesh, t_cfg.batch_size))
       pending.append((step + 1, metrics))
       steps_since += 1
       bar.update(1)
-      done = step + 1 == t_cfg.num_steps
+      done = step + 1 == until
       if (step + 1) % t_cfg.log_every == 0 or done or ckpt.should_save(step + 1):
         pending = jax.device_get(pending)  # the only host transfer: at logging steps
         _check_finite(pending, ckpt)

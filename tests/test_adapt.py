@@ -41,7 +41,8 @@ def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_pat
   assert '| base model | `ours` |' in card and '2 steps' in card and 'experiments.adapt' in card
   # The drive's pairs were mined first and trained on.
   kept = mined_pairs.read_kept(str(out / 'mined_pairs.csv'))
-  assert f'| mined pairs | {len(kept)} (`{out / "mined_pairs.csv"}`) |' in card
+  assert f'| mined pairs | {len(kept)} (`{out / "mined_pairs.csv"}`) (classical teacher, ' \
+      f'gaps 1,2,4,8: ' in card
   assert 'two-view training' in card
   # Its keypoint domain chosen on the mined pairs, as the card says.
   adapted_domain = pretrained.load(str(out)).keypoints

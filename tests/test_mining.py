@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import spatial
 
-from ssd_jax import errors, geometry
+from ssd_jax import errors, geometry, pretrained
 from ssd_jax.data import clean, datasets, groundtruth, io, kitti, mined_pairs
 from ssd_jax.registration import mining
 from ssd_jax.synthetic import cross_sensor
@@ -142,6 +142,43 @@ def test_workers_find_the_same_pairs_and_a_rerun_registers_none(drive, monkeypat
   mining.mine(scans, lambda p: calls.append(p) or clean.read_metres(p, 'auto'), gaps=(1, 2),
               done=again.done, say=lambda s: None)
   assert calls == []
+
+
+def test_a_long_drive_is_thinned_and_widening_doubles_the_reached_gap():
+  scans = [f's{k:03d}' for k in range(457)]
+  thinned = mining.spread(scans, 120)
+  assert len(thinned) == 115 and thinned[:3] == ['s000', 's004', 's008']
+  assert mining.spread(scans[:50], 120) == scans[:50]
+  with pytest.raises(errors.UserError, match='max_scans must be 3 or more'):
+    mining.spread(scans, 2)
+  poses = [_pose(0, 2.0 * k, 0) for k in range(9)]
+  pairs = [_pair(poses, 0, 2), _pair(poses, 0, 8)]
+  pairs[0].kept = True
+  assert mining.widened_gaps(pairs) == (4, 8)
+  assert mining.widened_gaps(pairs[1:]) == ()
+
+
+def test_a_widening_round_is_gated_with_the_labels_before_it(drive, tmp_path):
+  """Gap 2 mined by the learned teacher into a file of the gap-1 labels: its pairs are
+  kept through loops with them, right, and every earlier pair stays as it was."""
+  scans, poses, path, pairs, _, _ = drive
+  rows = open(path).read().splitlines()
+  first = [rows[0]] + [r for r in rows[1:] if r.split(',')[2] == '1']
+  widened = tmp_path / 'mined.csv'
+  widened.write_text('\n'.join(first) + '\n')
+  every = mining.mine_to_file(str(widened), scans, functools.partial(clean.read_metres,
+                                                                     fmt='auto'),
+                              gaps=(2,), model=pretrained.load('ours'), say=lambda s: None)
+  before = {(p.cloud1, p.cloud2): p for p in pairs if p.gap == 1}
+  far = [p for p in every if p.gap == 2]
+  assert len(every) == 7 and len(far) == 3
+  assert sum(p.kept for p in far) >= 2
+  kept = [p for p in far if p.kept]
+  assert mining.label_errors(kept, poses, {s: n for n, s in enumerate(scans)})['success'].all()
+  for p in every:
+    if p.gap == 1:
+      np.testing.assert_allclose(p.transform, before[p.cloud1, p.cloud2].transform, atol=1e-9)
+  assert len(mined_pairs.read_kept(str(widened))) == sum(p.kept for p in every)
 
 
 def test_a_file_that_is_not_mined_pairs_is_one_line(tmp_path):

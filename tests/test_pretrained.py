@@ -89,3 +89,32 @@ def test_shipped_models_load_without_a_config_file_and_have_a_card(name):
   desc = inference.describe(model, pts, pts[:16])
   assert desc.shape == (16, model.net.descriptor_dim) and np.all(np.isfinite(desc))
   np.testing.assert_allclose(np.linalg.norm(desc, axis=1), 1.0, atol=1e-4)
+
+
+@pytest.mark.multiprocess
+@pytest.mark.slow
+def test_the_wheel_carries_every_shipped_model(tmp_path):
+  """`pip install .` as a user does (a wheel, not editable): every folder of
+  ssd_jax/weights/ is in it, and each model loads by name from another directory."""
+  root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+  pip = [sys.executable, '-m', 'pip', '--disable-pip-version-check', '-q']
+  built = subprocess.run(pip + ['wheel', '--no-deps', '-w', str(tmp_path / 'wheel'), root],
+                         capture_output=True, text=True, timeout=600)
+  assert built.returncode == 0, built.stderr[-3000:]
+  wheel, = (tmp_path / 'wheel').glob('ssd_jax-*.whl')
+  site = tmp_path / 'site'
+  installed = subprocess.run(pip + ['install', '--no-deps', '--target', str(site), str(wheel)],
+                             capture_output=True, text=True, timeout=600)
+  assert installed.returncode == 0, installed.stderr[-3000:]
+  assert sorted(p.name for p in (site / 'ssd_jax' / 'weights').iterdir()) == sorted(
+      p.name for p in pretrained.WEIGHTS_DIR.iterdir()) == sorted(pretrained.SHIPPED)
+  code = ('import ssd_jax; from ssd_jax import pretrained; '
+          'print(ssd_jax.__file__); '
+          'print(*[pretrained.load(n).step for n in sorted(pretrained.SHIPPED)])')
+  run = subprocess.run([sys.executable, '-c', code], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=600, env={**os.environ, 'PYTHONPATH': str(site)})
+  assert run.returncode == 0, run.stderr[-3000:]
+  where, steps = run.stdout.splitlines()[-2:]
+  assert where.startswith(str(site))
+  assert [int(s) for s in steps.split()] == [pretrained.load(n).step
+                                            for n in sorted(pretrained.SHIPPED)]

@@ -172,6 +172,11 @@ def test_resume_after_a_crash_is_bitwise_identical(tiny_config, tmp_path, monkey
                               jax.device_get(straight.batch_stats))
   assert _read_metrics(tmp_path / 'resumed') == _read_metrics(tmp_path / 'straight')
   assert [m['step'] for m in _read_metrics(tmp_path / 'resumed')] == list(range(1, 9))
+  # Trained in two rounds (to step 3, then on: `until`), the schedule is the full run's.
+  first = train.train_and_evaluate(config, str(tmp_path / 'rounds'), until=3)
+  assert int(first.step) == 3
+  rounds = train.train_and_evaluate(config, str(tmp_path / 'rounds'))
+  chex.assert_trees_all_equal(jax.device_get(rounds.params), jax.device_get(straight.params))
 
 
 @pytest.mark.real_data

@@ -17,6 +17,8 @@ Commands (~1.5 hours on 2 CPU cores in all):
     python -m experiments.evaluate --config=configs/evals/adaptation_os0.py \
         --workdir=runs/adaptation_os0
 
+The figures below were measured with every scan mined and no widening: add
+`--config.mining.max_scans=210 --config.mining.widen_rounds=0` to the first adapt command.
 (`--poses` only lets `experiments.mine --poses=...` report the mined labels' precision:
 554 of 649 candidates kept, every label within 2 m / 5 deg, median 0.022 m / 0.16 deg.)
 Rows: the descriptor alone (upright RANSAC's best pose) from farthest-point keypoints of

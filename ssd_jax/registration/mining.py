@@ -10,12 +10,18 @@ project's own classical registration, and kept only where it is self-consistent.
    and no pose is read.
 3. Gate: a pair is *confident* when its verified pose lays `MIN_FITNESS` of scan 2's
    structure on scan 1 with no distinct pose close behind
-   (`verification.clearly_confident`) and the scans fix every degree of freedom
-   (`uncertainty`: a corridor is not a label). It is *kept* when it is also one side of
+   (`verification.clearly_confident`) and the register command's verdict trusts it
+   (`verdict`: no free-space conflict, no corridor). It is *kept* when it is also one side of
    a loop of three confident pairs (i, j), (j, k), (i, k) whose poses agree:
-   T_ij T_jk within `CYCLE_ROTATION_DEG` and `CYCLE_TRANSLATION_M` of T_ik. Two wrong
-   poses rarely compose into a third wrong pose found on its own, so the loop, not the
-   fitness, is what makes a label trustworthy.
+   T_ij T_jk within `CYCLE_ROTATION_DEG` and `CYCLE_TRANSLATION_M` of T_ik, or of four,
+   T_ij T_jl against T_ik T_kl. Two wrong poses rarely compose into a third wrong pose found
+   on its own, so the loop, not the fitness, is what makes a label trustworthy.
+
+Widening (EYOC's curriculum): a model trained on the kept pairs registers farther pairs
+than its teacher did; `widened_gaps` names the next gaps, `mine(model=...)` registers them
+with it (the same gate), and `mine_to_file` gates the pairs of every round together, so
+a far pair is also kept through loops closed by nearer labels of the round before.
+`spread` thins a long drive to the scans mined (the cost is a pair's registration).
 
 `label_errors` measures the kept labels against ground-truth poses where a user has them
 (the miner never reads them).
@@ -25,8 +31,11 @@ from __future__ import annotations
 
 import contextlib
 from concurrent import futures
+import functools
 import multiprocessing
 import os
+import threading
+import time
 from typing import Callable, Sequence
 
 import numpy as np
@@ -63,6 +72,21 @@ def teacher_options() -> pipeline.Options:
   return pipeline.Options(descriptor='fpfh')
 
 
+def spread(scans: Sequence[str], max_scans: int) -> list[str]:
+  """Every k-th of `scans` (capture order), k the least that leaves at most `max_scans`:
+  the growing gaps then reach as far in metres for a fraction of the registrations."""
+  if max_scans < 3:
+    raise errors.UserError(f'max_scans must be 3 or more (a loop takes three), got {max_scans}')
+  return list(scans)[::-(-len(scans) // max_scans) or 1]
+
+
+def widened_gaps(pairs: Sequence[MinedPair], count: int = 2) -> tuple[int, ...]:
+  """The `count` gaps after the largest at which `pairs` kept any, each twice the last
+  (() when none was kept)."""
+  reached = max((p.gap for p in pairs if p.kept), default=0)
+  return tuple(reached * 2 ** k for k in range(1, count + 1)) if reached else ()
+
+
 def candidate_pairs(num_scans: int, gaps: Sequence[int] = DEFAULT_GAPS
                     ) -> list[tuple[int, int]]:
   """(i, i + g) for each scan i and gap g, ordered by i so that a batch registration
@@ -79,19 +103,29 @@ def cycle_error(t_ab: np.ndarray, t_bc: np.ndarray, t_ac: np.ndarray) -> tuple[f
 
 
 def apply_gate(pairs: list[MinedPair], index: dict[str, int]) -> list[MinedPair]:
-  """Sets `kept` and `reason` of every pair (`index`: each cloud's capture position)."""
+  """Sets `kept` and `reason` of every pair (`index`: each cloud's capture position): kept
+  where confident and a side of a consistent loop of three confident pairs (i, j, k), or
+  of four (i, j, l and i, k, l: two far pairs joined at both ends by nearer ones, where a
+  drive's near pairs are too sparse to close triangles with them)."""
   sure = {(index[p.cloud1], index[p.cloud2]): p for p in pairs if p.confident}
   after: dict[int, list[int]] = {}
   for i, j in sure:
     after.setdefault(i, []).append(j)
   consistent: set[tuple[int, int]] = set()
-  for (i, j), first in sure.items():
+
+  def close(loop, via_a, via_b):   # T along via_a equals T along via_b
+    compose = lambda path: functools.reduce(np.matmul, [sure[e].transform for e in path])
+    rot, trans = cycle_error(compose(via_a), np.eye(4), compose(via_b))
+    if rot <= CYCLE_ROTATION_DEG and trans <= CYCLE_TRANSLATION_M:
+      consistent.update(loop)
+
+  for (i, j) in sure:
     for k in after.get(j, []):
-      if (i, k) not in sure:
-        continue
-      rot, trans = cycle_error(first.transform, sure[j, k].transform, sure[i, k].transform)
-      if rot <= CYCLE_ROTATION_DEG and trans <= CYCLE_TRANSLATION_M:
-        consistent.update({(i, j), (j, k), (i, k)})
+      if (i, k) in sure:
+        close({(i, j), (j, k), (i, k)}, [(i, j), (j, k)], [(i, k)])
+      for m in after.get(i, []):
+        if m != j and (m, k) in sure:
+          close({(i, j), (j, k), (i, m), (m, k)}, [(i, j), (j, k)], [(i, m), (m, k)])
   for p in pairs:
     p.kept = p.confident and (index[p.cloud1], index[p.cloud2]) in consistent
     if p.confident:   # the others keep their registration's reason
@@ -101,6 +135,7 @@ def apply_gate(pairs: list[MinedPair], index: dict[str, int]) -> list[MinedPair]
 
 def mine(scans: Sequence[str], read: Callable[[str], np.ndarray], *,
          gaps: Sequence[int] = DEFAULT_GAPS, options: pipeline.Options | None = None,
+         model=None,
          done: dict[tuple[str, str], MinedPair] | None = None,
          on_pair: Callable[[MinedPair], None] | None = None,
          say: Callable[[str], None] = print, workers: int = 1) -> list[MinedPair]:
@@ -111,26 +146,29 @@ def mine(scans: Sequence[str], read: Callable[[str], np.ndarray], *,
   and every larger one are left (the scans are too far apart there to register, and the
   teacher spends longest on pairs it cannot register). read: path -> [N, 3] points
   (metres, each scan in its sensor's frame); options: the registration (default
-  `teacher_options()`); done: pairs registered by an earlier run, by (cloud1, cloud2), not
-  registered again; on_pair: called with each pair as it is registered (before the
-  gate), e.g. to append it to a file; say: told the gap at which mining stopped; workers:
-  processes registering chunks of CHUNK consecutive pairs at once (`read` must then be
-  picklable, e.g. a module function or a `functools.partial` of one); the pairs and
-  their poses do not depend on it. A pair whose file cannot be read is not confident
-  (its reason says why); the others go on."""
-  options = teacher_options() if options is None else options
+  `teacher_options()`, or the register command's defaults with `model`, a learned teacher
+  registered in this process); done: pairs registered by an earlier run, by (cloud1,
+  cloud2), not registered again; on_pair: called with each pair as it is registered
+  (before the gate), e.g. to append it to a file; say: told the gap at which mining
+  stopped; workers: processes registering chunks of CHUNK consecutive pairs at once
+  (`read` must then be picklable, e.g. a module function or a `functools.partial` of one);
+  the pairs and their poses do not depend on it. A pair whose file cannot be read is not
+  confident (its reason says why); the others go on."""
+  if options is None:
+    options = teacher_options() if model is None else pipeline.Options()
   done = dict(done or {})
   scans = [str(s) for s in scans]
   out: list[MinedPair] = []
   with contextlib.ExitStack() as stack:
     pool = (stack.enter_context(futures.ProcessPoolExecutor(
-        workers, mp_context=multiprocessing.get_context('spawn'))) if workers > 1 else None)
+        workers, mp_context=multiprocessing.get_context('spawn'), initializer=_end_with,
+        initargs=(os.getpid(),))) if workers > 1 and model is None else None)
 
     def run(pairs, gap):
       fresh = [p for p in pairs if p not in done]
       if pool is None or len(fresh) <= CHUNK:
         stream = (_judged(result, gap) for result in pipeline.register_many(
-            fresh, read, options=options, say=lambda line: None))
+            fresh, read, model=model, options=options, say=lambda line: None))
       else:   # each worker its own chunks of consecutive pairs (it keeps their clouds)
         stream = (pair for f in futures.as_completed(
             [pool.submit(_registered, fresh[k:k + CHUNK], read, options, gap)
@@ -155,6 +193,16 @@ def mine(scans: Sequence[str], read: Callable[[str], np.ndarray], *,
   return apply_gate(out, {s: n for n, s in enumerate(scans)})
 
 
+def _end_with(parent: int) -> None:
+  """A mining worker's start: it ends when `parent` does (a killed command leaves no
+  worker registering on)."""
+  def watch():
+    while os.getppid() == parent:
+      time.sleep(1)
+    os._exit(1)
+  threading.Thread(target=watch, daemon=True).start()
+
+
 def _registered(pairs: list[tuple[str, str]], read, options: pipeline.Options,
                 gap: int) -> list[MinedPair]:
   """The pairs registered in turn (one `register_many`: their clouds kept) and judged."""
@@ -163,22 +211,27 @@ def _registered(pairs: list[tuple[str, str]], read, options: pipeline.Options,
 
 
 def mine_to_file(path: str, scans: Sequence[str], read: Callable[[str], np.ndarray], *,
-                 gaps: Sequence[int] = DEFAULT_GAPS,
+                 gaps: Sequence[int] = DEFAULT_GAPS, model=None,
                  progress: Callable[[], None] | None = None,
                  say: Callable[[str], None] = print, workers: int = 1) -> list[MinedPair]:
   """`mine` into the miner's CSV at `path` (`mined_pairs.PairsFile`): each pair appended as
   it is registered (`progress()` called), a rerun registering only what the file lacks,
-  the file rewritten with every pair after the gate. -> the pairs."""
+  the file rewritten with every pair it holds (earlier rounds' too) gated together.
+  -> every pair of the file among `scans`."""
   file = mined_pairs.PairsFile(path)
 
   def on_pair(pair):
     file.add(pair)
     if progress is not None:
       progress()
-  pairs = mine(scans, read, gaps=gaps, done=file.done, on_pair=on_pair, say=say,
-               workers=workers)
-  file.write(pairs)
-  return pairs
+  pairs = mine(scans, read, gaps=gaps, model=model, done=file.done, on_pair=on_pair,
+               say=say, workers=workers)
+  index = {s: n for n, s in enumerate(scans)}
+  every, others = [], []   # others: pairs of scans not mined now, kept in the file as found
+  for p in {**file.done, **{(p.cloud1, p.cloud2): p for p in pairs}}.values():
+    (every if p.cloud1 in index and p.cloud2 in index else others).append(p)
+  file.write(apply_gate(every, index) + others)
+  return every
 
 
 def _judged(result: pipeline.PairResult, gap: int) -> MinedPair:
@@ -190,11 +243,10 @@ def _judged(result: pipeline.PairResult, gap: int) -> MinedPair:
   sure = (reg.verified_fitness is not None
           and verification.clearly_confident(reg.verified_poses, reg.verified_fitness,
                                              MIN_FITNESS))
-  free = reg.uncertainty.free if reg.uncertainty is not None else ''
-  reason = ('' if sure and not free else f'degenerate: {free}' if sure
-            else 'no confident pose')
+  reason = ('no confident pose' if not sure else
+            '' if reg.verdict is None or reg.verdict.registered else reg.verdict.reason)
   return MinedPair(result.target, result.source, gap, reg.transform, fitness,
-                   sure and not free, reason=reason)
+                   sure and not reason, reason=reason)
 
 
 def label_errors(pairs: Sequence[MinedPair], poses: np.ndarray, index: dict[str, int]
