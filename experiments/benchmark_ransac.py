@@ -2,7 +2,7 @@ r"""RANSAC speed: this project's JAX RANSAC vs Open3D's, on the same corresponde
 
     python -m experiments.benchmark_ransac --dataset=data_cache/synthetic_small/test_kitti \
         [--max_pairs=60]
-    # upright RANSAC's samplings (pipeline.SAMPLINGS), matching included
+    # upright RANSAC's samplings (options.SAMPLINGS), matching included
     python -m experiments.benchmark_ransac --estimator=upright \
         --dataset=data_cache/cross_sensor/synthetic [--max_pairs=60]
 
@@ -14,7 +14,7 @@ median time per pair and the success rate against the ground truth, plus the
 sequential numpy reference (same samples and trial count as the JAX version).
 
 `--estimator=upright`: 1,024 farthest-point keypoints + FPFH (cap 200) per cloud, then
-`pipeline.estimate` (matching and upright RANSAC) with uniform and with compatible samples;
+`pair_stages.estimate` (matching and upright RANSAC) with uniform and with compatible samples;
 median time per pair, success and the median trials. On the synthetic cross-sensor test
 set (60 pairs, 2-core AMD EPYC VM): docs/registration.md.
 """
@@ -28,13 +28,15 @@ from tqdm import auto as tqdm
 
 from ssd_jax import cli
 from ssd_jax.data import io, registration_sets
-from ssd_jax.registration import matching, metrics, pipeline, ransac
+from ssd_jax.registration import matching, metrics, ransac
+from ssd_jax.registration import cloud_features, pair_stages
+from ssd_jax.registration import options as options_lib
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('dataset', 'data_cache/synthetic_small/test_kitti', 'Registration test set.')
 flags.DEFINE_integer('max_pairs', 60, 'Pairs to use (0 = all).')
 flags.DEFINE_integer('repeats', 3, 'Timed repeats per pair and method (median taken).')
-flags.DEFINE_enum('estimator', 'rigid', pipeline.ESTIMATORS, 'rigid: the paper\'s RANSAC '
+flags.DEFINE_enum('estimator', 'rigid', options_lib.ESTIMATORS, 'rigid: the paper\'s RANSAC '
                   'against Open3D\'s; upright: its samplings against each other.')
 
 
@@ -52,17 +54,17 @@ def open3d_ransac(xyz1, xyz2, max_trials, confidence, threshold, seed):
 
 def upright_samplings(pairs) -> None:
   """Prints matching + upright RANSAC per pair with each sampling but 'auto'."""
-  cache, rows = {}, {s: [] for s in pipeline.SAMPLINGS if s != 'auto'}
+  cache, rows = {}, {s: [] for s in options_lib.SAMPLINGS if s != 'auto'}
   for n, pair in enumerate(tqdm.tqdm(pairs, desc='pairs', unit='pair')):
     for path in (pair.cloud1, pair.cloud2):
       if path not in cache:
-        cache[path] = pipeline.cloud_features(io.read_cloud(path), 'auto', 'fpfh',
+        cache[path] = cloud_features.cloud_features(io.read_cloud(path), 'auto', 'fpfh',
                                               fpfh_max_nn=200)
     for sampling in rows:
       times = []
       for _ in range(FLAGS.repeats):
         start = time.perf_counter()
-        reg = pipeline.estimate(cache[pair.cloud1], cache[pair.cloud2], seed=n,
+        reg = pair_stages.estimate(cache[pair.cloud1], cache[pair.cloud2], seed=n,
                                 estimator='upright', sampling=sampling)
         times.append(time.perf_counter() - start)
       rows[sampling].append((float(np.median(times)), reg.trials,
@@ -92,7 +94,7 @@ def main(argv):
     for path in (pair.cloud1, pair.cloud2):
       if path not in cache:
         pts = io.read_cloud(path)
-        cache[path] = pipeline.cloud_features(pts, 'iss', 'fpfh', fpfh_max_nn=200)
+        cache[path] = cloud_features.cloud_features(pts, 'iss', 'fpfh', fpfh_max_nn=200)
     f1, f2 = cache[pair.cloud1], cache[pair.cloud2]
     nn = matching.nearest_neighbour_matches(f1.descriptors, f2.descriptors)
     xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[nn].astype(np.float64)

@@ -50,7 +50,7 @@ from ssd_jax import cli, pretrained
 from ssd_jax.data import clean, io, registration_sets
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.data import preprocess
-from ssd_jax.registration import features, metrics, pipeline
+from ssd_jax.registration import cloud_features, features, metrics, pair_stages
 from ssd_jax.registration.reference import SETTINGS, open3d_register
 
 FLAGS = flags.FLAGS
@@ -90,7 +90,8 @@ def _runner(method: str, model):
   def features_of(path, cache, seed):
     if cache is not None and path in cache:
       return cache[path]
-    f = pipeline.features_anywhere(_read(path), 'iss', descriptor, model, seed, FLAGS.fpfh_max_nn)
+    f = cloud_features.features_anywhere(_read(path), 'iss', descriptor, model, seed,
+                                         FLAGS.fpfh_max_nn)
     if cache is not None:
       cache[path] = f
     return f
@@ -99,7 +100,7 @@ def _runner(method: str, model):
     t0 = time.perf_counter()
     f1, f2 = features_of(path1, cache, seed), features_of(path2, cache, seed)
     features_s = time.perf_counter() - t0
-    reg = pipeline.estimate(f1, f2, seed)
+    reg = pair_stages.estimate(f1, f2, seed)
     return reg.transform, {'features': features_s, **reg.seconds}
   return run
 
@@ -199,7 +200,7 @@ def _dense_rows(pair, n: int) -> list:
       t0 = time.perf_counter()
       clouds = [preprocess.voxel_downsample(_read(p), 0.2, np.float64) for p in paths]
       t, stages, _ = open3d_register(clouds[0], clouds[1], 0, 'tutorial')
-      rows.append((f"Open3D's pipeline, tutorial searches, voxel_down_sample(0.2) first",
+      rows.append(("Open3D's pipeline, tutorial searches, voxel_down_sample(0.2) first",
                    'dense: 1 pair, in process', 1, {**stages, 'total': time.perf_counter() - t0},
                    metrics.registration_errors(pair.transform, t)['success']))
   return rows

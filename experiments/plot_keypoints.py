@@ -14,7 +14,8 @@ from absl import flags
 from ssd_jax import cli, pretrained, viz
 from ssd_jax.data import clean, io
 from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.registration import pipeline
+from ssd_jax.registration import cloud_features
+from ssd_jax.registration import options as options_lib
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('cloud', None, 'Cloud file (.bin, .npy, .ply, .pcd).')
@@ -29,9 +30,10 @@ def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f'Unexpected arguments: {argv[1:]}')
   quiet_libraries()
-  bad = [s for s in FLAGS.sources if s not in pipeline.KEYPOINTS]
+  bad = [s for s in FLAGS.sources if s not in options_lib.KEYPOINTS]
   if bad:
-    raise SystemExit(f'error: unknown keypoint source(s) {bad}; choose from {pipeline.KEYPOINTS}')
+    raise SystemExit(f'error: unknown keypoint source(s) {bad}; choose from '
+                     f'{options_lib.KEYPOINTS}')
   if 'learned' in FLAGS.sources and not FLAGS.checkpoint:
     raise SystemExit('error: learned keypoints need --checkpoint')
   points = clean.clean_cloud(io.read_cloud(FLAGS.cloud), FLAGS.cloud)
@@ -40,7 +42,7 @@ def main(argv):
     model = pretrained.load(FLAGS.checkpoint)
   shown = {}
   for source in FLAGS.sources:
-    idx, _ = pipeline.compute_keypoints(points, source, model)
+    idx, _ = cloud_features.compute_keypoints(points, source, model)
     shown[f'{source} keypoints'] = points[idx]
     print(f'{source}: {len(idx)} keypoints')
   viz.plot_keypoints(points, shown, FLAGS.out)

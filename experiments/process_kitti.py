@@ -17,7 +17,7 @@ import numpy as np
 
 from ssd_jax import cli
 from ssd_jax.data import kitti
-from ssd_jax.registration import pipeline
+from ssd_jax.registration import pair_stages
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('kitti_root', None, 'Folder holding sequences/ and poses/.')
@@ -37,7 +37,7 @@ def main(argv):
   for seq in FLAGS.sequences:
     n, m, corr = kitti.process_sequence(
         FLAGS.kitti_root, seq, FLAGS.out, FLAGS.spacing, FLAGS.pair_distance,
-        FLAGS.voxel_size, FLAGS.normal_radius, pipeline.refine_icp if FLAGS.icp else None)
+        FLAGS.voxel_size, FLAGS.normal_radius, pair_stages.refine_icp if FLAGS.icp else None)
     line = f'sequence {seq}: {n} clouds, {m} pairs'
     if corr:
       dt = np.array([c['rte'] for c in corr])

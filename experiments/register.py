@@ -6,7 +6,7 @@ r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into clou
     python -m experiments.register --pairs=PAIRS.txt --out=DIR      # many pairs, one process
     python -m experiments.register --sequence=SCANS_DIR --out=DIR   # consecutive scans
 
-The defaults are `pipeline.Options()` (docs/registration.md). Each cloud is put on the
+The defaults are `options.Options()` (docs/registration.md). Each cloud is put on the
 model's 0.2 m grid first (--voxel=0: every point). Batch mode (`pipeline.register_many`)
 describes each cloud once and writes DIR/registrations.csv row by row (a failed pair gets
 its error and the rest go on; a rerun registers only the pairs without a row), and for
@@ -28,21 +28,23 @@ from ssd_jax import cli, errors, pretrained, viz
 from ssd_jax.data import clean, groundtruth, io
 from ssd_jax.logging_utils import quiet_libraries
 from ssd_jax.registration import features, metrics, outputs, pipeline
+from ssd_jax.registration import cloud_features, pair_stages
+from ssd_jax.registration import options as options_lib
 
 FLAGS = flags.FLAGS
-DEFAULTS = pipeline.Options()
+DEFAULTS = options_lib.Options()
 flags.DEFINE_string('cloud1', None, 'Target cloud (its frame is the output frame).')
 flags.DEFINE_string('cloud2', None, 'Source cloud, mapped into cloud 1 by T_12.')
 flags.DEFINE_enum('format', 'auto', ['auto', *io.BIN_FORMATS],
                   '.bin layout (float32 rows; *64: float64 rows); auto refuses to guess.')
-flags.DEFINE_enum('keypoints', DEFAULTS.keypoints, pipeline.KEYPOINTS, 'auto: 1,024 farthest-'
+flags.DEFINE_enum('keypoints', DEFAULTS.keypoints, options_lib.KEYPOINTS, 'auto: 1,024 farthest-'
                   "point keypoints (of the points above the ground for a model whose config "
                   "says inference.keypoints='structure', as experiments.adapt may set); iss: "
                   "the paper's; learned: a detector model's.")
-flags.DEFINE_enum('ransac', DEFAULTS.estimator, pipeline.ESTIMATORS,
+flags.DEFINE_enum('ransac', DEFAULTS.estimator, options_lib.ESTIMATORS,
                   'upright: 2-point samples of a turn about z and a shift (z up); rigid: '
                   "3-point samples, any rotation (the paper's).")
-flags.DEFINE_enum('sampling', DEFAULTS.sampling, pipeline.SAMPLINGS, "Upright RANSAC's "
+flags.DEFINE_enum('sampling', DEFAULTS.sampling, options_lib.SAMPLINGS, "Upright RANSAC's "
                   'matches and samples: compatible (matches both ways, samples among pairs '
                   'that one turn and shift fit), uniform (nearest neighbours, uniform '
                   'draws), auto (compatible with --verify=0, else uniform).')
@@ -51,7 +53,7 @@ flags.DEFINE_integer('verify', DEFAULTS.verify, "Check RANSAC's this many distin
 flags.DEFINE_integer('bev', DEFAULTS.bev, "Also check the bird's-eye-view search's this many "
                      'best poses (needs --ransac=upright and --verify > 0).')
 flags.DEFINE_list('descriptor', [DEFAULTS.descriptor], 'learned, fpfh; a list runs each.')
-flags.DEFINE_enum('level', DEFAULTS.level, pipeline.LEVELS,
+flags.DEFINE_enum('level', DEFAULTS.level, options_lib.LEVELS,
                   'ground: level each tilted scan by its ground first; none: take z as up.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: ours, or '
                     'ours_detector for learned keypoints).')
@@ -71,11 +73,11 @@ flags.DEFINE_string('out', None, 'Batch mode: output folder (a rerun keeps its r
 flags.DEFINE_bool('stop_on_error', False, 'Batch mode: stop at the first pair that fails.')
 
 
-def _options(descriptor: str) -> pipeline.Options:
+def _options(descriptor: str) -> options_lib.Options:
   if FLAGS['bev'].present and FLAGS.bev > 0 and (FLAGS.ransac != 'upright' or FLAGS.verify <= 0):
     raise errors.UserError("--bev needs --ransac=upright and --verify > 0 (its poses turn "
                            "about z only, and are checked with RANSAC's)")
-  return pipeline.Options(FLAGS.keypoints, descriptor, FLAGS.ransac, FLAGS.verify, FLAGS.bev,
+  return options_lib.Options(FLAGS.keypoints, descriptor, FLAGS.ransac, FLAGS.verify, FLAGS.bev,
                           FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed,
                           FLAGS.level, FLAGS.sampling)
 
@@ -88,7 +90,7 @@ def _show_progress() -> bool:
   return sys.stderr.isatty() if FLAGS.progress is None else FLAGS.progress
 
 
-def _batch(options: pipeline.Options, model, model_name: str) -> None:
+def _batch(options: options_lib.Options, model, model_name: str) -> None:
   """Every pair of --pairs, or consecutive scans of --sequence, into --out (`register_many`)."""
   pairs = (outputs.sequence_pairs(FLAGS.sequence) if FLAGS.sequence
            else outputs.read_pairs(FLAGS.pairs))
@@ -154,14 +156,14 @@ def main(argv):
 
 
 def _register_pair(options, loaded, name: str, bar: cli.StageBar) -> None:
-  voxel = pipeline.voxel_size_of(loaded) if FLAGS.voxel is None else FLAGS.voxel
+  voxel = cloud_features.voxel_size_of(loaded) if FLAGS.voxel is None else FLAGS.voxel
   clouds, read_seconds = [], {}
   for n, path in enumerate((FLAGS.cloud1, FLAGS.cloud2), 1):
     bar.stage(f'reading {os.path.basename(path)}')
     t0 = time.perf_counter()
     cloud = _read(path)
     t1 = time.perf_counter()
-    cloud, note = pipeline.to_grid(cloud, voxel)   # float64 until register() centres it
+    cloud, note = cloud_features.to_grid(cloud, voxel)   # float64 until register() centres it
     read_seconds.update({f'cloud{n}_read': t1 - t0, f'cloud{n}_grid': time.perf_counter() - t1})
     if note:
       bar.say(f'voxel: {os.path.basename(path)}: {note}')
@@ -180,7 +182,7 @@ def _register_pair(options, loaded, name: str, bar: cli.StageBar) -> None:
                             (len(clouds[0]), len(clouds[1])), voxel)
     out['seconds'].update(read_seconds)
     out['seconds']['total'] = time.perf_counter() - start + sum(read_seconds.values())
-    out['overlap_fitness'] = pipeline.overlap_fitness(clouds[0], clouds[1], reg.transform)
+    out['overlap_fitness'] = pair_stages.overlap_fitness(clouds[0], clouds[1], reg.transform)
     if t_gt is not None:
       out['errors'] = metrics.registration_errors(t_gt, reg.transform)
     results.append(out)

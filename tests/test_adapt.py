@@ -15,6 +15,8 @@ from ssd_jax import geometry, pretrained
 from ssd_jax.data import io, mined_pairs, registration_sets
 from ssd_jax.evaluation import feature_store
 from ssd_jax.registration import bev, keypoint_choice, metrics, pipeline
+from ssd_jax.registration import cloud_features
+from ssd_jax.registration import options as options_lib
 from ssd_jax.registration import keypoints as keypoints_lib
 from ssd_jax.synthetic import cross_sensor
 from tests.conftest import shared_path, tiny_cross_sensor_config
@@ -56,7 +58,7 @@ def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_pat
   pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
   reg, _, _ = pipeline.register(target=io.read_cloud(pair.cloud1),
                                 source=io.read_cloud(pair.cloud2), model=adapted,
-                                options=pipeline.Options.paper('learned'))
+                                options=options_lib.Options.paper('learned'))
   assert metrics.registration_errors(pair.transform, reg.transform)['success']
 
 
@@ -89,18 +91,18 @@ def test_structure_keypoints_are_the_farthest_points_above_the_ground(tmp_path):
   cloud = _street()
   ours = pretrained.load('ours')
   structure = dataclasses.replace(ours, keypoints='structure')
-  everywhere, _ = pipeline.compute_keypoints(cloud, 'auto', ours)
-  above, _ = pipeline.compute_keypoints(cloud, 'auto', structure)
+  everywhere, _ = cloud_features.compute_keypoints(cloud, 'auto', ours)
+  above, _ = cloud_features.compute_keypoints(cloud, 'auto', structure)
   np.testing.assert_array_equal(everywhere, keypoints_lib.farthest_point_keypoints(cloud, 1024))
   assert (cloud[everywhere, 2] < 0.1).mean() > 0.5          # mostly ground
   height = bev.height_above_ground(cloud)
   assert len(above) == 1024 and (height[above] > bev.HEIGHT[0]).all()
   assert (cloud[above, 2] > 0.3).all()                       # on the walls
   # The register defaults' two levels and the evaluation's 'structure' rows agree.
-  levels = pipeline.feature_levels(cloud.astype(np.float64), 'auto', 'learned', structure)
+  levels = cloud_features.feature_levels(cloud.astype(np.float64), 'auto', 'learned', structure)
   np.testing.assert_array_equal(levels.keypoints(1), above)
   assert len(levels.keypoints(0)) == 512 and (height[levels.keypoints(0)] > 0.4).all()
-  idx, coarse = pipeline.auto_keypoints(cloud, domain='structure')
+  idx, coarse = cloud_features.auto_keypoints(cloud, domain='structure')
   np.testing.assert_array_equal(idx, above)
   np.testing.assert_array_equal(idx[coarse], levels.keypoints(0))
   np.save(tmp_path / 'street.npy', cloud)
@@ -109,10 +111,10 @@ def test_structure_keypoints_are_the_farthest_points_above_the_ground(tmp_path):
   # A cloud with too little rising from its ground keeps all its points to sample from.
   flat = cloud[cloud[:, 2] < 0.1]
   flat = np.concatenate([flat, [[0, 0, 1.0]] * 10]).astype(np.float32)
-  np.testing.assert_array_equal(pipeline.keypoint_domain(flat, 'structure'),
+  np.testing.assert_array_equal(cloud_features.keypoint_domain(flat, 'structure'),
                                 np.arange(len(flat)))
   with pytest.raises(ValueError, match="keypoint domain must be one of .*got 'ground'"):
-    pipeline.keypoint_domain(cloud, 'ground')
+    cloud_features.keypoint_domain(cloud, 'ground')
 
 
 def test_choice_pairs_reach_past_the_miners_gaps_by_chaining_two_kept_pairs():

@@ -5,7 +5,8 @@ import pytest
 
 from ssd_jax import geometry
 from ssd_jax.data import io
-from ssd_jax.registration import bev, metrics, pipeline, verification
+from ssd_jax.registration import bev, metrics, verification
+from ssd_jax.registration import cloud_features, pair_stages
 from tests.conftest import shared_path
 
 
@@ -96,12 +97,12 @@ def test_verification_with_bev_candidates_registers_where_every_ransac_pose_is_w
   cloud1, cloud2, t_true = _pair(-65.0, [-20.0, 6.0, 0.0])
   wrong = np.stack([t_true @ geometry.make_transform(geometry.rotation_z(a), np.array([8.0, 0, 0]))
                     for a in (0.0, 0.5, 1.0)])
-  f = pipeline.CloudFeatures(cloud2[:10], np.eye(10), {})
-  reg = pipeline.Registration(wrong[0], np.stack([np.arange(10)] * 2, 1), np.zeros(10, bool),
+  f = cloud_features.CloudFeatures(cloud2[:10], np.eye(10), {})
+  reg = pair_stages.Registration(wrong[0], np.stack([np.arange(10)] * 2, 1), np.zeros(10, bool),
                               0, {}, candidates=wrong)
-  assert not metrics.registration_errors(t_true, pipeline.verify(reg, f, f, cloud1,
+  assert not metrics.registration_errors(t_true, pair_stages.verify(reg, f, f, cloud1,
                                                                  cloud2).transform)['success']
-  verified = pipeline.verify(reg, f, f, cloud1, cloud2, bev_candidates=3)
+  verified = pair_stages.verify(reg, f, f, cloud1, cloud2, bev_candidates=3)
   assert len(verified.verified_fitness) == 6 and verified.seconds['bev'] > 0
   err = metrics.registration_errors(t_true, verified.transform)
   assert err['rte'] < 0.1 and err['rre_geodesic'] < 0.3, err
@@ -115,18 +116,18 @@ def test_a_ransac_pose_that_fits_confidently_is_taken_without_the_bev_search(mon
   cloud1, cloud2, t_true = _pair(-65.0, [-20.0, 6.0, 0.0])
   off = lambda d: t_true @ geometry.make_transform(np.eye(3), np.array([d, 0.0, 0.0]))
   candidates = np.stack([off(8.0), off(0.3), off(-8.0)])
-  f = pipeline.CloudFeatures(cloud2[:10], np.eye(10), {})
-  reg = pipeline.Registration(candidates[0], np.stack([np.arange(10)] * 2, 1),
+  f = cloud_features.CloudFeatures(cloud2[:10], np.eye(10), {})
+  reg = pair_stages.Registration(candidates[0], np.stack([np.arange(10)] * 2, 1),
                               np.zeros(10, bool), 0, {}, candidates=candidates)
   searches = []
   original = bev.search
   monkeypatch.setattr(bev, 'search', lambda *a, **k: searches.append(1) or original(*a, **k))
-  verified = pipeline.verify(reg, f, f, cloud1, cloud2, bev_candidates=5)
+  verified = pair_stages.verify(reg, f, f, cloud1, cloud2, bev_candidates=5)
   assert not searches and len(verified.verified_fitness) == 3
   assert verified.verified_fitness.max() >= verification.CONFIDENT_FITNESS
   assert verified.seconds['bev'] == 0.0
   np.testing.assert_array_equal(verified.transform,
-                                pipeline.verify(reg, f, f, cloud1, cloud2).transform)
+                                pair_stages.verify(reg, f, f, cloud1, cloud2).transform)
   assert metrics.registration_errors(t_true, verified.transform)['rte'] < 0.1
 
 

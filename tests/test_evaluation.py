@@ -16,7 +16,7 @@ from ssd_jax import errors, geometry, inference, pretrained, train
 from ssd_jax.configs import paper_small
 from ssd_jax.configs.evals import registration as registration_config
 from ssd_jax.data import clusters, io, registration_sets
-from ssd_jax.registration import bev, features, pipeline, verification
+from ssd_jax.registration import bev, cloud_features, features, verification
 from ssd_jax.evaluation import (descriptor_matching, evaluators, feature_store, fingerprint,
                                 learning_curve, orientation, precision, registration,
                                 repeatability)
@@ -421,7 +421,7 @@ def test_feature_store_shares_work_between_rows_and_changes_no_result(tmp_path, 
   each equals what the row computes alone."""
   scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
   scan = scan[np.linalg.norm(scan[:, :2], axis=1) < 30]
-  scan, _ = pipeline.to_grid(scan, 0.2)   # as every test set: FPFH over the cloud itself
+  scan, _ = cloud_features.to_grid(scan, 0.2)   # as every test set: FPFH over the cloud itself
   turn = geometry.make_transform(geometry.rotation_z(np.radians(30.0)), np.array([2.0, 1.0, 0.0]))
   paths = [str(tmp_path / 'a.npy'), str(tmp_path / 'b.npy')]
   np.save(paths[0], scan.astype(np.float32))
@@ -470,7 +470,7 @@ def test_feature_store_takes_as_many_farthest_point_keypoints_as_asked(tmp_path)
 
 def test_register_pairs_refuses_an_unknown_sampling_before_any_pair():
   # A wrong value must stop the evaluation in one line, not fail every pair as a
-  # ValueError from `pipeline.estimate` would.
+  # ValueError from `pair_stages.estimate` would.
   with pytest.raises(errors.UserError, match="sampling must be one of .*got 'guided'"):
     registration.register_pairs([], ['auto+fpfh+upright'], feature_store.FeatureStore({}),
                                 progress=False, sampling='guided')

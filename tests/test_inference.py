@@ -251,9 +251,10 @@ def test_describe_fn_of_the_shipped_model_matches_a_scan_to_its_turned_copy():
   keypoints as `describe` does (its descriptors' nearest neighbours), each scan's balls
   sampled by its own draws."""
   from ssd_jax import pretrained  # pylint: disable=g-import-not-at-top
-  from ssd_jax.registration import keypoints as keypoints_lib, pipeline  # pylint: disable=g-import-not-at-top
+  from ssd_jax.registration import cloud_features  # pylint: disable=g-import-not-at-top
+  from ssd_jax.registration import keypoints as keypoints_lib  # pylint: disable=g-import-not-at-top
   scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin'))
-  points, _ = pipeline.to_grid(scan.astype(np.float32), 0.2)
+  points, _ = cloud_features.to_grid(scan.astype(np.float32), 0.2)
   model = pretrained.load('ours')
   kp = points[keypoints_lib.farthest_point_keypoints(points, 256)]
   angle = np.deg2rad(70.0)

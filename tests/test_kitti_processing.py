@@ -5,7 +5,7 @@ import pytest
 
 from ssd_jax import geometry
 from ssd_jax.data import groundtruth, io, kitti
-from ssd_jax.registration import pipeline
+from ssd_jax.registration import pair_stages
 from ssd_jax.synthetic import dataset
 from tests.conftest import tiny_synthetic_config as tiny_config
 
@@ -33,7 +33,7 @@ def test_processing_recovers_the_true_velodyne_poses(tmp_path):
                            kitti.read_velodyne_to_camera(root / 'sequences' / '00' / 'calib.txt')),
       drive.poses, atol=1e-9)
   n, m, corrections = kitti.process_sequence(str(root), '00', str(tmp_path / 'out'), 5.0, 10.0,
-                                             0.2, 1.0, refine=pipeline.refine_icp)
+                                             0.2, 1.0, refine=pair_stages.refine_icp)
   assert len(drive.poses) - 2 <= n <= len(drive.poses) and m >= 5   # the U-turn may skip one
   out = tmp_path / 'out' / '00'
   for p in groundtruth.read_groundtruths(out / 'groundtruths_kitti.txt'):

@@ -7,6 +7,7 @@ from ssd_jax import errors, geometry, pretrained
 from ssd_jax.data import io, registration_sets
 from ssd_jax.evaluation import feature_store
 from ssd_jax.registration import leveling, metrics, pipeline
+from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
 
 
@@ -74,7 +75,7 @@ def test_tilted_scans_register_through_levelling_in_their_own_frames(scan, tmp_p
   # cloud 2 seen from the moved, tilted sensor: T_12 = move.
   cloud2 = (cloud2 - move[:3, 3]) @ move[:3, :3] + rng.normal(0, 0.01, cloud2.shape)
   model = pretrained.load('ours')
-  alone = pipeline.Options(verify=0, bev=0, level='ground')
+  alone = options_lib.Options(verify=0, bev=0, level='ground')
   reg, f1, f2 = pipeline.register(target=cloud1, source=cloud2, model=model, options=alone)
   err = metrics.registration_errors(move, reg.transform)
   assert err['success'] and err['rte'] < 0.5 and err['rre_geodesic'] < 1.0, err
@@ -86,14 +87,14 @@ def test_tilted_scans_register_through_levelling_in_their_own_frames(scan, tmp_p
   # With every default and levelling, too, one pair or many; and a cloud without ground
   # gets its note and an answer from the rotation-invariant path.
   reg, _, _ = pipeline.register(target=cloud1, source=cloud2, model=model,
-                                options=pipeline.Options(level='ground'))
+                                options=options_lib.Options(level='ground'))
   assert metrics.registration_errors(move, reg.transform)['success']
   # (cloud 2 without its ground, and pitched 60 degrees: no plane within 45 of its z).
   up = cloud2 @ move[:3, :3].T + move[:3, 3]                      # in cloud 1's frame
   steep = geometry.make_transform(_tilt(60.0, 0.0), np.zeros(3))
   source = (cloud2[up[:, 2] > -1.2] - steep[:3, 3]) @ steep[:3, :3]
   no_ground, _, _ = pipeline.register(target=cloud1, source=source, model=model,
-                                      options=pipeline.Options(level='ground'))
+                                      options=options_lib.Options(level='ground'))
   assert any('no ground plane found' in n for n in no_ground.notes), no_ground.notes
   assert pipeline.ANY_ROTATION_NOTE in no_ground.notes, no_ground.notes
   assert metrics.registration_errors(move @ steep, no_ground.transform)['success']
@@ -102,7 +103,7 @@ def test_tilted_scans_register_through_levelling_in_their_own_frames(scan, tmp_p
   groundless = scan[1::2][scan[1::2, 2] > -1.2]
   groundless = (groundless - yaw[:3, 3]) @ yaw[:3, :3]
   upright, _, _ = pipeline.register(target=cloud1, source=groundless, model=model,
-                                    options=pipeline.Options(level='ground'))
+                                    options=options_lib.Options(level='ground'))
   assert any('cloud 2: no ground plane found' in n for n in upright.notes), upright.notes
   assert pipeline.UPRIGHT_NOTE in upright.notes, upright.notes
   assert metrics.registration_errors(yaw, upright.transform)['success']
@@ -113,7 +114,7 @@ def test_tilted_scans_register_through_levelling_in_their_own_frames(scan, tmp_p
   lines = []
   many = list(pipeline.register_many([(str(tmp_path / 'a.npy'), str(tmp_path / f'{n}.npy'))
                                       for n in 'bc'], np.load, model=model,
-                                     options=pipeline.Options(level='ground'), say=lines.append))
+                                     options=options_lib.Options(level='ground'), say=lines.append))
   assert not any(m.error for m in many)
   np.testing.assert_allclose(many[0].registration.transform, reg.transform, atol=5e-3)
   np.testing.assert_allclose(many[1].registration.transform, no_ground.transform, atol=5e-3)

@@ -9,7 +9,7 @@ import pytest
 from scipy import spatial
 
 from ssd_jax import errors, geometry, pretrained
-from ssd_jax.data import clean, datasets, groundtruth, io, kitti, mined_pairs
+from ssd_jax.data import clean, datasets, groundtruth, kitti, mined_pairs
 from ssd_jax.registration import mining
 from ssd_jax.synthetic import cross_sensor
 from tests.conftest import tiny_cross_sensor_config

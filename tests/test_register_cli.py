@@ -13,7 +13,8 @@ import pytest
 
 from ssd_jax import geometry, pretrained
 from ssd_jax.data import io, registration_sets
-from ssd_jax.registration import metrics, pipeline
+from ssd_jax.registration import metrics
+from ssd_jax.registration import options as options_lib
 from ssd_jax.synthetic import degenerate
 from tests.conftest import shared_path
 
@@ -104,8 +105,8 @@ def test_register_cli_describes_with_the_shipped_model_by_default(tiny_set, tmp_
   assert result['keypoints'] == 'auto' and result['keypoint_domain'] == 'all'   # ours: all points
   # Verified poses: one sampling of 32 points of each ball (an eighth of the network's
   # work), not the model's own 4 of 64 (the paper's protocol).
-  assert result['draws'] == pipeline.VERIFIED_DRAWS == 1
-  assert result['num_samples'] == pipeline.VERIFIED_SAMPLES == 32
+  assert result['draws'] == options_lib.VERIFIED_DRAWS == 1
+  assert result['num_samples'] == options_lib.VERIFIED_SAMPLES == 32
   assert (pretrained.load('ours').draws, pretrained.load('ours').num_samples) == (4, 64)
   assert result['errors']['success'], result
   # --draws=0: the model's own setting; the same pair registers alike.

@@ -9,6 +9,8 @@ from ssd_jax import geometry, pretrained
 from ssd_jax.data import io
 from ssd_jax import errors
 from ssd_jax.registration import icp, metrics, pipeline, verification
+from ssd_jax.registration import cloud_features, pair_stages
+from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
 
 
@@ -65,18 +67,18 @@ def test_register_many_reads_and_prepares_each_cloud_once_and_registers_as_one_p
 
 
 def test_options_are_checked_and_say_where_the_bev_search_applies():
-  assert pipeline.Options().bev_candidates == 5
-  assert pipeline.Options(estimator='rigid').bev_candidates == 0
-  assert pipeline.Options(verify=0).bev_candidates == 0
-  assert pipeline.Options.paper().keypoints == 'iss'
+  assert options_lib.Options().bev_candidates == 5
+  assert options_lib.Options(estimator='rigid').bev_candidates == 0
+  assert options_lib.Options(verify=0).bev_candidates == 0
+  assert options_lib.Options.paper().keypoints == 'iss'
   for bad, message in (({'verify': -1}, r'verify must be >= 0 \(0: no verification\)'),
                        ({'descriptor': 'shot'}, "descriptor must be one of"),
                        ({'voxel': -0.2}, 'voxel must be >= 0')):
     with pytest.raises(errors.UserError, match=message):
-      pipeline.Options(**bad)
+      options_lib.Options(**bad)
   with pytest.raises(errors.UserError, match='need a model'):
-    pipeline.Options().describing(None)
-  assert pipeline.Options(descriptor='fpfh').describing(object()) is None
+    options_lib.Options().describing(None)
+  assert options_lib.Options(descriptor='fpfh').describing(object()) is None
 
 
 @pytest.mark.real_data
@@ -106,7 +108,7 @@ def test_verification_aligns_only_the_candidates_that_could_win(monkeypatch):
 @pytest.mark.real_data
 def test_verification_sharing_a_memo_repeats_no_icp_and_gives_the_same_result(monkeypatch):
   """RANSAC's candidates verified, then those and more with the same memo (as
-  pipeline.verify does before and after the BEV search): the second call aligns only
+  pair_stages.verify does before and after the BEV search): the second call aligns only
   what the first did not, and its answer is that of one call on all candidates."""
   scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
   t_true = geometry.make_transform(geometry.rotation_z(np.radians(-30.0)), np.array([4.0, 1.0, 0.0]))
@@ -145,14 +147,14 @@ def test_coarse_to_fine_ends_at_a_confident_coarse_pose_and_else_registers_as_wi
   confident enough the full level decides, to exactly the pose of a registration
   without levels."""
   paths, truth = _views(tmp_path)
-  model = pipeline.verified_model(pretrained.load('ours'))
+  model = options_lib.verified_model(pretrained.load('ours'))
   registrar = pipeline.Registrar(np.load, model=model, say=lambda line: None)
   reg, f1, _ = registrar.register(paths['a'], paths['b'])
-  assert reg.levels_tried == 1 and len(f1.xyz) == pipeline.COARSE_KEYPOINTS
+  assert reg.levels_tried == 1 and len(f1.xyz) == cloud_features.COARSE_KEYPOINTS
   assert reg.verified_fitness.max() >= verification.CONFIDENT_FITNESS
   for path in (paths['a'], paths['b']):
     levels = registrar.cloud(path)[0].features
-    assert len(levels.described()) == pipeline.COARSE_KEYPOINTS < len(levels.idx)
+    assert len(levels.described()) == cloud_features.COARSE_KEYPOINTS < len(levels.idx)
   assert metrics.registration_errors(truth['b'], reg.transform)['success']
 
   monkeypatch.setattr(verification, 'CONFIDENT_FITNESS', 1.01)   # never confident
@@ -160,7 +162,7 @@ def test_coarse_to_fine_ends_at_a_confident_coarse_pose_and_else_registers_as_wi
   reg_fine, g1, _ = fine.register(paths['a'], paths['b'])
   assert reg_fine.levels_tried == 2 and len(g1.xyz) == len(fine.cloud(paths['a'])[0].features.idx)
   entries = [fine.cloud(p)[0] for p in (paths['a'], paths['b'])]
-  one_level, _, _ = pipeline.coarse_to_fine(
+  one_level, _, _ = pair_stages.coarse_to_fine(
       entries[0].features.levels[-1:], entries[1].features.levels[-1:], entries[0].points,
       entries[1].points, candidates=10, bev_candidates=5)
   np.testing.assert_array_equal(reg_fine.transform, one_level.transform)

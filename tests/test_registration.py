@@ -10,6 +10,8 @@ from ssd_jax import geometry
 from ssd_jax.data import clean, groundtruth, io, registration_sets
 from ssd_jax.evaluation import registration
 from ssd_jax.registration import features, keypoints, matching, metrics, pipeline, ransac
+from ssd_jax.registration import cloud_features, pair_stages
+from ssd_jax.registration import options as options_lib
 from ssd_jax.registration import reference
 from ssd_jax.synthetic import trajectory
 from tests.conftest import shared_path
@@ -169,9 +171,9 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
   c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
   # As scanned (sensor at the origin): exactly the stage-by-stage result, no shift.
   reg, _, _ = pipeline.register(target=c1, source=c2,
-                                options=pipeline.Options.paper(fpfh_max_nn=200))
-  staged = pipeline.estimate(pipeline.cloud_features(c1, fpfh_max_nn=200),
-                             pipeline.cloud_features(c2, fpfh_max_nn=200))
+                                options=options_lib.Options.paper(fpfh_max_nn=200))
+  staged = pair_stages.estimate(cloud_features.cloud_features(c1, fpfh_max_nn=200),
+                             cloud_features.cloud_features(c2, fpfh_max_nn=200))
   np.testing.assert_allclose(reg.transform, staged.transform, atol=1e-9)
   assert metrics.registration_errors(pair.transform, reg.transform)['success']
   centre = c1.mean(axis=0)
@@ -180,7 +182,7 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
     shift = geometry.make_transform(np.eye(3), offset)
     t_gt = shift @ pair.transform @ geometry.invert_transform(shift)
     reg, f1, _ = pipeline.register(target=c1 + offset, source=c2 + offset,
-                                   options=pipeline.Options.paper(fpfh_max_nn=200))
+                                   options=options_lib.Options.paper(fpfh_max_nn=200))
     moved = lambda t: (c2 + offset) @ t[:3, :3].T + t[:3, 3]
     errors.append(np.linalg.norm(moved(reg.transform) - moved(t_gt), axis=1))
     assert np.abs(f1.xyz - offset).max() < 100   # keypoints in the caller's coordinates
@@ -198,10 +200,10 @@ def test_pipeline_refuses_bad_clouds_with_one_line():
                        (pts + 5.4e6, 'float32 resolves only 0.5 m; subtract an offset'),
                        (pts[:5], r'iss keypoints: found a cloud of 5 points, 64')):
     with pytest.raises(ValueError, match=message):
-      pipeline.cloud_features(bad, fpfh_max_nn=50)
+      cloud_features.cloud_features(bad, fpfh_max_nn=50)
   for idx in (np.array([0, 500]), np.array([[1, 2]]), np.array([0.5])):
     with pytest.raises(ValueError, match='keypoint_idx must be'):
-      pipeline.compute_descriptors(pts, idx, 'fpfh')
+      cloud_features.compute_descriptors(pts, idx, 'fpfh')
   # Coordinates that even their own file type cannot resolve: said so, not "degenerate".
   with pytest.raises(clean.CloudDataError, match='float32 resolves only 64 m; store it'):
     clean.clean_cloud((pts + 1e9).astype(np.float32), 'far')
@@ -237,7 +239,7 @@ def test_farthest_point_order_is_the_sampling_of_every_prefix():
   assert len(np.unique(order)) == 300
   for j in (1, 50, 150, 300):
     np.testing.assert_array_equal(np.sort(order[:j]), keypoints.farthest_point_keypoints(pts, j))
-  idx, coarse = pipeline.auto_keypoints(pts, 300, coarse=100)
+  idx, coarse = cloud_features.auto_keypoints(pts, 300, coarse=100)
   np.testing.assert_array_equal(idx[coarse], np.sort(order[:100]))
 
 
@@ -291,12 +293,12 @@ def test_iss_falls_back_on_a_sparse_cloud_and_says_so():
   assert len(idx) >= 3 and f'ISS found {len(keypoints.iss(sparse))} keypoints in {len(sparse)}' \
       in note and ('farthest-point' in note or 'radii' in note), note
   # The pipeline carries the note, and a sparse pair registers instead of failing.
-  reg, f1, _ = pipeline.register(target=sparse, source=sparse, options=pipeline.Options.paper())
+  reg, f1, _ = pipeline.register(target=sparse, source=sparse, options=options_lib.Options.paper())
   assert f1.note == note and any(note in n for n in reg.notes)
   # The evaluation protocol keeps the paper's ISS: too few keypoints fail the pair there.
-  idx, note = pipeline.compute_keypoints(sparse, 'iss', fallback=False)
+  idx, note = cloud_features.compute_keypoints(sparse, 'iss', fallback=False)
   assert note == '' and len(idx) == len(keypoints.iss(sparse))
-  auto, _ = pipeline.compute_keypoints(sparse, 'auto')
+  auto, _ = cloud_features.compute_keypoints(sparse, 'auto')
   np.testing.assert_array_equal(auto, keypoints.farthest_point_keypoints(sparse, 1024))
 
 
@@ -319,14 +321,14 @@ def test_upright_fit_is_exact_and_upright_ransac_finds_a_pose_at_few_inliers():
   res = ransac.ransac_upright(dst, src, samples)
   err = metrics.registration_errors(t_tilt, res.transform)
   assert err['rte'] < 0.2 and err['rre_geodesic'] < 0.5 and res.inliers[~wrong].mean() > 0.9
-  reg = pipeline.estimate(pipeline.CloudFeatures(dst, np.eye(400), {}),
-                          pipeline.CloudFeatures(src, np.eye(400), {}), estimator='upright')
+  reg = pair_stages.estimate(cloud_features.CloudFeatures(dst, np.eye(400), {}),
+                          cloud_features.CloudFeatures(src, np.eye(400), {}), estimator='upright')
   assert metrics.registration_errors(t_tilt, reg.transform)['success']
   assert 0 < reg.fitness <= 1 and reg.correspondence_set_size == round(reg.fitness * 400)
   assert 0 < reg.inlier_rmse < 1.0
   with pytest.raises(ValueError, match='estimator must be one of'):
-    pipeline.estimate(pipeline.CloudFeatures(dst, np.eye(400), {}),
-                      pipeline.CloudFeatures(src, np.eye(400), {}), estimator='affine')
+    pair_stages.estimate(cloud_features.CloudFeatures(dst, np.eye(400), {}),
+                      cloud_features.CloudFeatures(src, np.eye(400), {}), estimator='affine')
 
 
 @pytest.mark.real_data
@@ -356,7 +358,7 @@ def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root
   c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
   rng = np.random.default_rng(0)
   dense = [np.repeat(c, 12, axis=0) + rng.normal(0, 0.03, (12 * len(c), 3)) for c in (c1, c2)]
-  options = pipeline.Options(descriptor='fpfh', verify=0, icp=True)
+  options = options_lib.Options(descriptor='fpfh', verify=0, icp=True)
   reg, f1, f2 = pipeline.register(target=c1, source=c2, options=options)
   assert 'used as given' in f1.grid and 'used as given' in f2.grid
   stages = []
@@ -371,7 +373,7 @@ def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root
   diff = geometry.invert_transform(reg.transform) @ reg_d.transform
   assert np.linalg.norm(diff[:3, 3]) < 0.05
   assert geometry.geodesic_angle_deg(diff[:3, :3], np.eye(3)) < 0.2
-  grid, note = pipeline.to_grid(dense[0], 0.0)
+  grid, note = cloud_features.to_grid(dense[0], 0.0)
   assert grid is dense[0] and note == ''
 
 
@@ -395,14 +397,14 @@ def test_verification_picks_the_pose_the_clouds_agree_with_among_ransacs_runners
   assert res.candidates.shape[1:] == (4, 4) and 2 <= len(res.candidates) <= 5
   np.testing.assert_array_equal(res.candidates[0], res.transform)
   assert not metrics.registration_errors(t_true, res.transform)['success']   # the decoy
-  f1 = pipeline.CloudFeatures(xyz1, np.eye(300), {})
-  f2 = pipeline.CloudFeatures(xyz2, np.eye(300), {})
-  estimated = pipeline.estimate(f1, f2, estimator='upright', candidates=5)
+  f1 = cloud_features.CloudFeatures(xyz1, np.eye(300), {})
+  f2 = cloud_features.CloudFeatures(xyz2, np.eye(300), {})
+  estimated = pair_stages.estimate(f1, f2, estimator='upright', candidates=5)
   assert len(estimated.candidates) <= 5
   np.testing.assert_array_equal(estimated.candidates[0], estimated.transform)
   reg = dataclasses.replace(estimated, transform=res.transform, inliers=res.inliers,
                             candidates=res.candidates)
-  verified = pipeline.verify(reg, f1, f2, cloud1, cloud2)
+  verified = pair_stages.verify(reg, f1, f2, cloud1, cloud2)
   err = metrics.registration_errors(t_true, verified.transform)
   assert err['rte'] < 0.05 and err['rre_geodesic'] < 0.2, err
   assert verified.verified_fitness.max() > 0.9 > verified.verified_fitness[0]
@@ -466,13 +468,13 @@ def test_matches_both_ways_add_the_sparser_clouds_nearest_neighbours():
   np.testing.assert_array_equal(matching.both_ways_matches(desc1, desc2),
                                 [[0, 0], [1, 0], [2, 0], [3, 1], [3, 2]])
   t_true, xyz1, xyz2 = _upright_correspondences(np.random.default_rng(2), 300, 30)
-  f1 = pipeline.CloudFeatures(xyz1, np.eye(300), {})
-  f2 = pipeline.CloudFeatures(xyz2, np.eye(300), {})
-  for sampling in pipeline.SAMPLINGS:
-    reg = pipeline.estimate(f1, f2, estimator='upright', sampling=sampling)
+  f1 = cloud_features.CloudFeatures(xyz1, np.eye(300), {})
+  f2 = cloud_features.CloudFeatures(xyz2, np.eye(300), {})
+  for sampling in options_lib.SAMPLINGS:
+    reg = pair_stages.estimate(f1, f2, estimator='upright', sampling=sampling)
     np.testing.assert_array_equal(reg.matches, np.stack([np.arange(300)] * 2, 1))
     assert metrics.registration_errors(t_true, reg.transform)['success'], sampling
   with pytest.raises(ValueError, match='sampling must be one of'):
-    pipeline.estimate(f1, f2, estimator='upright', sampling='guided')
+    pair_stages.estimate(f1, f2, estimator='upright', sampling='guided')
   with pytest.raises(Exception, match='sampling must be one of'):
-    pipeline.Options(sampling='guided')
+    options_lib.Options(sampling='guided')

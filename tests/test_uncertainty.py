@@ -7,6 +7,7 @@ import pytest
 from ssd_jax import geometry, pretrained
 from ssd_jax.data import io
 from ssd_jax.registration import icp, metrics, pipeline, uncertainty, verification
+from ssd_jax.registration import cloud_features
 from ssd_jax.synthetic import degenerate
 from tests.conftest import shared_path
 
@@ -53,8 +54,8 @@ def test_a_shift_along_a_corridor_tunnel_or_highway_is_free(kind):
   assert u.free.startswith('translation along (1.00, ') and 'not fixed' in u.free, u.free
   assert abs(u.translation_directions[0][0]) > 0.99
   # The truth is no better fixed: the same direction is free there.
-  grid1, _ = pipeline.to_grid(cloud1, 0.2)
-  grid2, _ = pipeline.to_grid(cloud2, 0.2)
+  grid1, _ = cloud_features.to_grid(cloud1, 0.2)
+  grid2, _ = cloud_features.to_grid(cloud2, 0.2)
   at_truth = uncertainty.assess(verification.target(grid1), verification.source(grid2).points,
                                 t_true)
   assert at_truth.translation_constraint[0] < uncertainty.MIN_CONSTRAINT

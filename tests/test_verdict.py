@@ -5,6 +5,7 @@ import pytest
 
 from ssd_jax.data import clean, groundtruth, io, kitti
 from ssd_jax.registration import free_space, metrics, pipeline, prepared, verdict
+from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
 
 
@@ -109,7 +110,7 @@ def test_register_returns_the_verdict_with_the_pose():
   defaults otherwise), registered for two real scans 7.8 m apart."""
   cloud1, cloud2, t12 = _drive_pair(0, 7)
   reg, _, _ = pipeline.register(target=cloud1, source=cloud2,
-                                options=pipeline.Options(descriptor='fpfh'))
+                                options=options_lib.Options(descriptor='fpfh'))
   assert metrics.registration_errors(t12, reg.transform)['success']
   assert reg.verdict.registered and reg.verdict.conflict is not None, reg.verdict
   assert reg.verdict.fitness >= verdict.MIN_FITNESS

@@ -74,7 +74,6 @@ def choose_pairs(poses: np.ndarray, bins: Sequence[Sequence[float]], per_bin: in
   usable one after it. Pairs turned less than `min_rotation_deg` apart are left out of
   bins starting at 0 m (a scan against one taken where it stood, not turned, is no test)."""
   out = []
-  n = len(poses)
   dist = np.linalg.norm(poses[:, None, :3, 3] - poses[None, :, :3, 3], axis=-1)
   for lo, hi in bins:
     cands = []

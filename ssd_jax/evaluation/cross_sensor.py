@@ -24,6 +24,7 @@ from ssd_jax import distributed, errors
 from ssd_jax.evaluation import feature_store, registration, tables
 from ssd_jax.data import clean
 from ssd_jax.registration import metrics, pipeline, reference, verification
+from ssd_jax.registration import options as options_lib
 
 # Rows that register whole clouds, without the project's keypoints and descriptors:
 # Open3D's own pipeline (the outside reference), and the bird's-eye-view search alone,
@@ -111,7 +112,7 @@ def register_command(pairs: Sequence, row: str, model, *, log: TextIO | None = N
   (`model`: the `inference.Model` its learned rows describe with) -> per-pair results in
   `registration.register_pairs`' layout, with the verdict (`verdict.Verdict.to_json`) and
   the seconds the pair cost in the batch."""
-  options = pipeline.Options(**COMMAND_ROWS[row][1])
+  options = options_lib.Options(**COMMAND_ROWS[row][1])
   stream = pipeline.register_many([(p.cloud1, p.cloud2) for p in pairs], clean.read_metres,
                                   model=model, options=options, say=lambda line: None)
   out = []

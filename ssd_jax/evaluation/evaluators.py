@@ -38,7 +38,8 @@ from ssd_jax import distributed, errors, viz
 from ssd_jax.data import clusters, io, registration_sets
 from ssd_jax.evaluation import (cross_sensor, descriptor_matching, feature_store, fingerprint,
                                 precision, registration, repeatability, report)
-from ssd_jax.registration import pipeline, reference
+from ssd_jax.registration import reference
+from ssd_jax.registration import pair_stages
 
 REPRODUCIBILITY = (
     'The same command on the same machine writes the same numbers (every stage is '
@@ -216,7 +217,7 @@ def _registration_figures(name, ev, ctx: Context, set_name, pair, skipped) -> li
                      f'{feature_store.missing_reason(row, ctx.missing)}')
       continue
     f1, f2 = ctx.store.features(pair.cloud1, row), ctx.store.features(pair.cloud2, row)
-    reg = pipeline.estimate(f1, f2, seed=cfg.seed * 1_000_003,
+    reg = pair_stages.estimate(f1, f2, seed=cfg.seed * 1_000_003,
                             inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
                             max_trials=cfg.max_trials)
     file = f'{name}_{set_name}_{row.replace("+", "_")}.png'

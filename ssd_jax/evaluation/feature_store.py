@@ -1,7 +1,7 @@
 """Keypoint x descriptor rows and a per-cloud cache of their features.
 
 A row is "keypoints+descriptor": keypoints `iss`, `random`, `auto` (farthest-point),
-`structure` (farthest-point of the points above the ground, `pipeline.keypoint_domain`)
+`structure` (farthest-point of the points above the ground, `cloud_features.keypoint_domain`)
 or a checkpoint name (its detector: attention + NMS, docs/method.md §4); descriptors
 `fpfh` or a checkpoint name. Checkpoint names map to training workdirs in the configs
 (`checkpoints.ours`, `checkpoints.feat3dnet`). Registration and the precision
@@ -22,7 +22,8 @@ import numpy as np
 from ssd_jax import errors, inference, pretrained
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
-from ssd_jax.registration import features as features_lib, leveling, pipeline
+from ssd_jax.registration import cloud_features, features as features_lib, leveling, pipeline
+from ssd_jax.registration import options as options_lib
 from ssd_jax.registration import keypoints as keypoints_lib
 from ssd_jax.registration import prepared as prepared_lib
 
@@ -51,7 +52,7 @@ DETECTORS = {
 CLUSTERS_KEPT = 8
 
 # A row's part 'verify': RANSAC's distinct best poses checked against the clouds
-# (`pipeline.verify`), this many; its part 'bev' (after 'verify'): the bird's-eye-view
+# (`pair_stages.verify`), this many; its part 'bev' (after 'verify'): the bird's-eye-view
 # search's best poses checked with them (`bev.search`), this many.
 VERIFY_CANDIDATES = 10
 BEV_CANDIDATES = 5
@@ -67,13 +68,13 @@ def _parts(row: str) -> tuple[list[str], str, bool, bool]:
   if verify:
     parts = parts[:3]
   estimator = 'rigid'
-  if len(parts) == 3 and parts[2] in pipeline.ESTIMATORS:
+  if len(parts) == 3 and parts[2] in options_lib.ESTIMATORS:
     parts, estimator = parts[:2], parts[2]
   if len(parts) != 2 or not all(parts) or (bev and estimator != 'upright'):
     raise errors.UserError(
         f'row {row!r} must be "keypoints+descriptor[+estimator[+verify[+bev]]]" (bev with '
         'the upright estimator), e.g. iss+fpfh or auto+ours+upright+verify+bev (estimators: '
-        f'{", ".join(pipeline.ESTIMATORS)})')
+        f'{", ".join(options_lib.ESTIMATORS)})')
   return parts, estimator, verify, bev
 
 
@@ -159,8 +160,8 @@ class FeatureStore:
   def __init__(self, models: Mapping, seed: int = 0,
                fpfh_max_nn: int = features_lib.FPFH_MAX_NN, level: str = 'none',
                num_keypoints: int = keypoints_lib.FARTHEST_POINT_KEYPOINTS):
-    if level not in pipeline.LEVELS:
-      raise errors.UserError(f'level must be one of {pipeline.LEVELS}, got {level!r}')
+    if level not in options_lib.LEVELS:
+      raise errors.UserError(f'level must be one of {options_lib.LEVELS}, got {level!r}')
     if not (isinstance(num_keypoints, int) and num_keypoints >= 3):
       raise errors.UserError(f'num_keypoints must be a whole number >= 3, got {num_keypoints!r}')
     self.num_keypoints = num_keypoints
@@ -189,7 +190,7 @@ class FeatureStore:
       if self.level == 'ground':
         t0 = time.perf_counter()
         self._levelings[key] = lv = leveling.level(
-            points, min_tilt_deg=pipeline.LEVEL_MIN_TILT_DEG)
+            points, min_tilt_deg=leveling.MIN_TILT_DEG)
         points = lv.apply(points).astype(np.float32)
         self.seconds['level'] += time.perf_counter() - t0
       self._clouds[key] = points
@@ -247,27 +248,27 @@ class FeatureStore:
       t0 = time.perf_counter()
       if source in ('auto', 'structure'):
         domain = 'all' if source == 'auto' else source
-        idx, self._coarse[key] = pipeline.auto_keypoints(points, self.num_keypoints,
+        idx, self._coarse[key] = cloud_features.auto_keypoints(points, self.num_keypoints,
                                                          domain=domain)
       elif source in BUILTIN_KEYPOINTS:
         # The protocol: a detector that finds too few keypoints fails the pair.
-        idx, _ = pipeline.compute_keypoints(points, source, seed=self.seed, fallback=False)
+        idx, _ = cloud_features.compute_keypoints(points, source, seed=self.seed, fallback=False)
       else:
-        idx, _ = pipeline.compute_keypoints(points, 'learned', self._model(source))
+        idx, _ = cloud_features.compute_keypoints(points, 'learned', self._model(source))
       self.seconds[f'keypoints:{source}'] += time.perf_counter() - t0
       self._keypoints[key] = idx
     return self._keypoints[key]
 
   def levels(self, path: str | os.PathLike, row: str) -> list:
-    """The feature levels a row registers `path` with (`pipeline.coarse_to_fine`): for a
+    """The feature levels a row registers `path` with (`pair_stages.coarse_to_fine`): for a
     row that verifies its poses with farthest-point keypoints, as the register command's
     defaults do, the coarse level, then all; else all. A learned descriptor of a row
-    that verifies describes as those defaults do (`pipeline.verified_model`:
+    that verifies describes as those defaults do (`options.verified_model`:
     VERIFIED_DRAWS samplings of VERIFIED_SAMPLES points). Each descriptor is computed
     once, when a level first needs it."""
     kp, desc = split_row(row)
     verified = row_verifies(row) and desc not in BUILTIN_DESCRIPTORS
-    name = (f'{desc}@draws={pipeline.VERIFIED_DRAWS},c={pipeline.VERIFIED_SAMPLES}'
+    name = (f'{desc}@draws={options_lib.VERIFIED_DRAWS},c={options_lib.VERIFIED_SAMPLES}'
             if verified else desc)
     key = (str(path), kp, name)
     if key not in self._descriptors:
@@ -276,10 +277,10 @@ class FeatureStore:
       if desc in BUILTIN_DESCRIPTORS and len(sources) > 1 and kp in sources:
         describe = lambda at: self._fpfh_together(path, sources, at)
       elif desc in BUILTIN_DESCRIPTORS:
-        describe = lambda at: pipeline.compute_descriptors(points, at, desc,
+        describe = lambda at: cloud_features.compute_descriptors(points, at, desc,
                                                            fpfh_max_nn=self.fpfh_max_nn)
       else:
-        model = pipeline.verified_model(self._model(desc)) if verified else self._model(desc)
+        model = options_lib.verified_model(self._model(desc)) if verified else self._model(desc)
         describe = lambda at, model=model: inference.describe(
             model, points, points[at], clusters=self._clusters_of(path, model, at))
 
@@ -290,7 +291,7 @@ class FeatureStore:
         return d
 
       coarse = self._coarse.get((str(path), kp))
-      self._descriptors[key] = pipeline.FeatureLevels(
+      self._descriptors[key] = cloud_features.FeatureLevels(
           points, [idx] if coarse is None else [idx[coarse], idx], timed)
     levels = self._descriptors[key]
     return levels.levels if row_verifies(row) else levels.levels[-1:]
@@ -302,11 +303,11 @@ class FeatureStore:
     `features.searched_on_grid`)."""
     key = (str(path), sources)
     if features_lib.searched_on_grid(self.cloud(path)):   # FPFH there depends on the set
-      return pipeline.compute_descriptors(self.cloud(path), at, 'fpfh',
+      return cloud_features.compute_descriptors(self.cloud(path), at, 'fpfh',
                                           fpfh_max_nn=self.fpfh_max_nn)
     if key not in self._fpfh:
       together = np.unique(np.concatenate([self.keypoints(path, s) for s in sources]))
-      d = pipeline.compute_descriptors(self.cloud(path), together, 'fpfh',
+      d = cloud_features.compute_descriptors(self.cloud(path), together, 'fpfh',
                                        fpfh_max_nn=self.fpfh_max_nn)
       self._fpfh[key] = ({int(i): n for n, i in enumerate(together)}, d)
     rows, d = self._fpfh[key]
@@ -325,7 +326,7 @@ class FeatureStore:
         self._clusters.popitem(last=False)
     return self._clusters[key]
 
-  def features(self, path: str | os.PathLike, row: str) -> pipeline.CloudFeatures:
+  def features(self, path: str | os.PathLike, row: str) -> cloud_features.CloudFeatures:
     """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud: all of its
     keypoints (`levels`)."""
     return self.levels(path, row)[-1]()

@@ -13,7 +13,9 @@ from tqdm import auto as tqdm
 from ssd_jax import distributed, errors, geometry
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import feature_store, paper, tables
-from ssd_jax.registration import metrics, pipeline
+from ssd_jax.registration import metrics
+from ssd_jax.registration import pair_stages
+from ssd_jax.registration import options as options_lib
 
 
 def summarize(results: list[dict]) -> dict[str, float]:
@@ -41,18 +43,18 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   """Register every pair with every row -> {row: [per-pair result]}.
 
   pairs: `registration_sets.RegistrationPair`s; `sampling`: the upright rows' matches and
-  samples (`pipeline.SAMPLINGS`). Pair n's RANSAC samples are seeded with
+  samples (`options.SAMPLINGS`). Pair n's RANSAC samples are seeded with
   seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
   result holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair
   with fewer than 3 keypoints in a cloud fails, with its `error`); a verified row's also
   its verdict (`verdict.Verdict.to_json`: `registered`, the `reason` its pose is not to be
-  trusted, '' where it is, and what was measured; `pipeline.assess`). With `log`, one
+  trusted, '' where it is, and what was measured; `pair_stages.assess`). With `log`, one
   JSON line per pair and row is written to it. Over several processes each registers its
   share of the pairs (`distributed.map_items`) and every process returns all results; the
   log is written when they are gathered.
   """
-  if sampling not in pipeline.SAMPLINGS:
-    raise errors.UserError(f'sampling must be one of {pipeline.SAMPLINGS}, got {sampling!r}')
+  if sampling not in options_lib.SAMPLINGS:
+    raise errors.UserError(f'sampling must be one of {options_lib.SAMPLINGS}, got {sampling!r}')
   one_process = jax.process_count() == 1
   store.describe_fpfh_together(rows)
 
@@ -63,7 +65,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
       try:
         verify = feature_store.row_verifies(row)
         prepared = store.pair(pair.cloud1, pair.cloud2)
-        reg, _, _ = pipeline.coarse_to_fine(
+        reg, _, _ = pair_stages.coarse_to_fine(
             store.levels(pair.cloud1, row), store.levels(pair.cloud2, row), prepared,
             seed=seed * 1_000_003 + n, inlier_threshold=inlier_threshold,
             confidence=confidence, max_trials=max_trials,
@@ -72,7 +74,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
             bev_candidates=feature_store.row_bev_candidates(row), verified=verify,
             sampling=sampling)
         if verify:   # the verdict, as the register command gives it
-          reg = pipeline.assess(reg, prepared)
+          reg = pair_stages.assess(reg, prepared)
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named
       except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,

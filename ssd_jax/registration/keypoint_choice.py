@@ -27,6 +27,7 @@ import numpy as np
 from ssd_jax import inference
 from ssd_jax.data import mined_pairs
 from ssd_jax.registration import metrics, pipeline
+from ssd_jax.registration import options as options_lib
 
 # Pairs registered per domain (~1 minute each on 2 cores).
 CHOICE_PAIRS = 32
@@ -78,7 +79,7 @@ def registered(model: inference.Model, pairs: Sequence[mined_pairs.MinedPair],
   """How many of `pairs` the model's descriptor alone (`--verify=0 --bev=0`) registers
   with 'auto' keypoints from the `keypoints` domain, against the miner's T_12."""
   model = dataclasses.replace(model, keypoints=keypoints)
-  options = pipeline.Options(verify=0, bev=0)
+  options = options_lib.Options(verify=0, bev=0)
   results = pipeline.register_many([(p.cloud1, p.cloud2) for p in pairs], read, model=model,
                                    options=options, say=lambda line: None)
   return sum(metrics.registration_errors(p.transform, r.registration.transform)['success']

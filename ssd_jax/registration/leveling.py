@@ -211,3 +211,38 @@ def from_gravity(gravity, center: np.ndarray | None = None) -> Leveling:
   tilt = float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0))))
   return Leveling(rotation_onto_z(up), np.zeros(3) if center is None else
                   np.asarray(center, np.float64), up, tilt)
+
+
+# Degrees: a scan whose ground is tilted by less than this is used as it is by the
+# registration (upright RANSAC's refit in 6 degrees of freedom and the ICP absorb it): the
+# real KITTI scans beside the project sit 2.3 degrees off their ground.
+MIN_TILT_DEG = 3.0
+
+
+def level_clouds(clouds, offset: np.ndarray, mode: str, names) -> tuple[list[Leveling], list[str]]:
+  """Each cloud's `Leveling` (in its coordinates less `offset` [3]) where `mode` ('none'
+  or 'ground', `options.LEVELS`) asks for it, and the one-line notes of what was done."""
+  if mode == 'none':
+    return [unchanged() for _ in clouds], []
+  found = [level(c - offset, min_tilt_deg=MIN_TILT_DEG, sensor_at_origin=not offset.any())
+           for c in clouds]
+  notes = []
+  for name, lv in zip(names, found):
+    if lv.sparse:
+      notes.append(f'{name}: too few points to find its ground '
+                   f'(< {MIN_POINTS_TO_LEVEL:,}); used as it is')
+    elif lv.note:
+      notes.append(f'{name}: {lv.note}')
+    elif lv.turned:
+      notes.append(f'{name}: levelled, its ground {lv.tilt_deg:.1f} degrees off horizontal')
+  return found, notes
+
+
+def unlevel(reg, found):
+  """A registration (`pair_stages.Registration`) of clouds levelled by `found` (one
+  `Leveling` each) in the clouds' own frames: every pose T' -> L1^-1 T' L2."""
+  back = lambda t: np.linalg.inv(found[0].matrix) @ t @ found[1].matrix
+  many = lambda ts: None if ts is None else np.stack([back(t) for t in ts])
+  return dataclasses.replace(reg, transform=back(reg.transform),
+                             candidates=many(reg.candidates),
+                             verified_poses=many(reg.verified_poses))

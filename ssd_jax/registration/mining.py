@@ -44,6 +44,7 @@ from ssd_jax import errors, geometry
 from ssd_jax.data import mined_pairs
 from ssd_jax.data.mined_pairs import MinedPair
 from ssd_jax.registration import metrics, pipeline, verification
+from ssd_jax.registration import options as options_lib
 
 DEFAULT_GAPS = (1, 2, 4, 8)
 # A verified pose is a candidate label from this fitness up: sparse scans 10-25 m apart
@@ -66,10 +67,10 @@ CHUNK = 16
 DEFAULT_WORKERS = max(1, min(8, os.cpu_count() or 1))
 
 
-def teacher_options() -> pipeline.Options:
+def teacher_options() -> options_lib.Options:
   """The classical registration that labels pairs: the register command's defaults with
   FPFH descriptors (no learned model); the verification's ICP refines each pose."""
-  return pipeline.Options(descriptor='fpfh')
+  return options_lib.Options(descriptor='fpfh')
 
 
 def spread(scans: Sequence[str], max_scans: int) -> list[str]:
@@ -134,7 +135,7 @@ def apply_gate(pairs: list[MinedPair], index: dict[str, int]) -> list[MinedPair]
 
 
 def mine(scans: Sequence[str], read: Callable[[str], np.ndarray], *,
-         gaps: Sequence[int] = DEFAULT_GAPS, options: pipeline.Options | None = None,
+         gaps: Sequence[int] = DEFAULT_GAPS, options: options_lib.Options | None = None,
          model=None,
          done: dict[tuple[str, str], MinedPair] | None = None,
          on_pair: Callable[[MinedPair], None] | None = None,
@@ -155,7 +156,7 @@ def mine(scans: Sequence[str], read: Callable[[str], np.ndarray], *,
   the pairs and their poses do not depend on it. A pair whose file cannot be read is not
   confident (its reason says why); the others go on."""
   if options is None:
-    options = teacher_options() if model is None else pipeline.Options()
+    options = teacher_options() if model is None else options_lib.Options()
   done = dict(done or {})
   scans = [str(s) for s in scans]
   out: list[MinedPair] = []
@@ -203,7 +204,7 @@ def _end_with(parent: int) -> None:
   threading.Thread(target=watch, daemon=True).start()
 
 
-def _registered(pairs: list[tuple[str, str]], read, options: pipeline.Options,
+def _registered(pairs: list[tuple[str, str]], read, options: options_lib.Options,
                 gap: int) -> list[MinedPair]:
   """The pairs registered in turn (one `register_many`: their clouds kept) and judged."""
   return [_judged(result, gap) for result in

@@ -15,6 +15,8 @@ import numpy as np
 from ssd_jax import errors, geometry
 from ssd_jax.data import groundtruth, io
 from ssd_jax.registration import metrics, pipeline, uncertainty
+from ssd_jax.registration import cloud_features, pair_stages
+from ssd_jax.registration import options as options_lib
 
 CSV_HEADER = [
     'cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials', 'seconds',
@@ -163,14 +165,14 @@ def ground_truth(path: str, cloud1: str, cloud2: str, required: bool = True,
   raise errors.UserError(f'{path} does not list the pair ({i1}, {i2})')
 
 
-def pair_json(reg: pipeline.Registration, f1: pipeline.CloudFeatures,
-              f2: pipeline.CloudFeatures, options: pipeline.Options, model, model_name: str,
-              points: tuple[int, int], voxel: float) -> dict:
+def pair_json(reg: pair_stages.Registration, f1: cloud_features.CloudFeatures,
+              f2: cloud_features.CloudFeatures, options: options_lib.Options, model,
+              model_name: str, points: tuple[int, int], voxel: float) -> dict:
   """The one-pair JSON of the register command (docs/registration.md)."""
   learned = options.descriptor == 'learned'
-  # Where 'auto' keypoints were sampled (`pipeline.keypoint_domain`): 'all' points, or the
+  # Where 'auto' keypoints were sampled (`cloud_features.keypoint_domain`): 'all' points, or the
   # 'structure' above the ground for a model `experiments.adapt` set so.
-  domain = pipeline.domain_of(model) if options.keypoints == 'auto' else None
+  domain = cloud_features.domain_of(model) if options.keypoints == 'auto' else None
   out = {'keypoints': options.keypoints, 'keypoint_domain': domain,
          'descriptor': options.descriptor,
          'num_keypoints': [len(f1.xyz), len(f2.xyz)], 'keypoint_levels': reg.levels_tried,
@@ -193,7 +195,7 @@ def pair_json(reg: pipeline.Registration, f1: pipeline.CloudFeatures,
   return out
 
 
-def summary(out: dict, reg: pipeline.Registration) -> str:
+def summary(out: dict, reg: pair_stages.Registration) -> str:
   """The lines the register command prints for one pair (`out`: `pair_json`'s, with the
   total seconds, the overlap fitness and, against ground truth, 'errors')."""
   u = reg.uncertainty

@@ -57,12 +57,12 @@ PRESCORE_DISTANCE = 1.5
 # poses of the right answer are often a cell or a yaw step apart.
 SAME_START = (0.5, 1.0)
 # A pose that lays at least this share of cloud 2's structure within FIT_DISTANCE of cloud 1
-# is taken without looking further (`pipeline.verify` skips the BEV search's candidates):
+# is taken without looking further (`pair_stages.verify` skips the BEV search's candidates):
 # no wrong pose of the project's sets came near it (RANSAC's best wrong ones fit <= 0.33),
 # and where RANSAC's best fits this well the BEV search never changed the outcome
 # (docs/registration.md: the register defaults' candidates).
 CONFIDENT_FITNESS = 0.5
-# A pose that ends the search early (`pipeline.coarse_to_fine`'s coarse level) must be
+# A pose that ends the search early (`pair_stages.coarse_to_fine`'s coarse level) must be
 # confident and clearly best: no candidate at least ransac.CANDIDATE_SEPARATION from it
 # fits within FINE_MARGIN of it. A real front-view (120 degree) re-scan's coarse level
 # verified a pose 1.8 m and 5 degrees off at 0.82 beside a distinct one at 0.76; from all
@@ -81,7 +81,7 @@ def clearly_confident(poses: np.ndarray, fitness: np.ndarray,
               and (len(order) < 2 or fitness[order[1]] < best - FINE_MARGIN))
 
 
-# Where only a confident pose is of use (`pipeline.coarse_to_fine`'s coarse level; RANSAC's
+# Where only a confident pose is of use (`pair_stages.coarse_to_fine`'s coarse level; RANSAC's
 # candidates before the BEV search's join them), the candidates are not refined in full
 # when the best coarse-aligned one fits under CONFIDENT_FITNESS - UNREFINED_MARGIN: the
 # full ICP raised a pose's fitness by at most 0.07 over its coarse alignment on the

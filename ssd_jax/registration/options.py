@@ -1,0 +1,143 @@
+"""How a pair is registered: the option vocabulary, `Options` (the register command's
+defaults; `Options.paper()`, the paper's protocol) and the learned descriptor's sampling
+where the poses are verified (`verified_model`)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from ssd_jax import errors
+from ssd_jax.registration import features
+
+KEYPOINTS = ('auto', 'iss', 'learned', 'random')
+DESCRIPTORS = ('fpfh', 'learned')
+# RANSAC's motion model: 'rigid', 3-point samples of any rotation (the paper's); 'upright',
+# 2-point samples of a turn about z and a translation, for scans whose z axis is up,
+# refit in 6 degrees of freedom (ransac.ransac_upright).
+ESTIMATORS = ('rigid', 'upright')
+# How the upright estimator takes its matches and samples (`estimate`): 'compatible', each
+# keypoint's nearest descriptor both ways (`matching.both_ways_matches`) and 2-point samples
+# drawn among the pairs of matches one turn about z and shift can fit
+# (`ransac.compatible_pairs`); 'uniform', cloud 1's nearest neighbours and uniform draws
+# (the paper's RANSAC with 2-point samples); 'auto', compatible where RANSAC's best pose is
+# the answer, uniform where its distinct best poses are verified against the clouds.
+# Compatible samples crowd into the strongest consensus: on a street that looks alike turned
+# by 180 degrees its 10 distinct best poses can all be variants of the turned one, where
+# uniform draws keep the right pose among them for the verification to pick
+# (docs/registration.md). The rigid estimator always samples uniformly.
+SAMPLINGS = ('auto', 'compatible', 'uniform')
+# Whether each scan is first turned level by its ground (`Options.level`, `leveling`).
+LEVELS = ('none', 'ground')
+
+
+# How the learned descriptor samples each ball where the candidate poses are verified
+# against the clouds (the register defaults): one draw of 32 points, as the shipped models
+# trained. More points and draws steady the matches that RANSAC's best pose alone depends on
+# (the shipped models' 4 draws of 64 points, for the paper's protocol); with the BEV search
+# and the verification picking the pose, one draw of 32 registered every pair that four of
+# 64 did on every set of the README's table, at an eighth of the network's work
+# (docs/notes/benchmarks.md).
+VERIFIED_DRAWS = 1
+VERIFIED_SAMPLES = 32
+
+
+def verified_model(model):
+  """`model` (an `inference.Model`, or None) describing with VERIFIED_DRAWS samplings of
+  VERIFIED_SAMPLES points (of its own num_samples, where fewer)."""
+  if model is None:
+    return None
+  return dataclasses.replace(model, draws=VERIFIED_DRAWS,
+                             num_samples=min(model.num_samples, VERIFIED_SAMPLES))
+
+
+@dataclasses.dataclass(frozen=True)
+class Options:
+  """How `register` and `register_many` register a pair. The defaults are the register
+  command's (docs/registration.md); `Options.paper()` is the paper's protocol.
+
+  keypoints   KEYPOINTS: 'auto' (1,024 farthest-point keypoints, the first 512 tried
+              alone where the poses are verified: `coarse_to_fine`), 'iss' (the paper's;
+              a pair RANSAC cannot sample is registered again with farthest-point
+              keypoints), 'learned' (a detector model), 'random'.
+  descriptor  DESCRIPTORS: 'learned' (needs a model) or 'fpfh'.
+  estimator   ESTIMATORS: 'upright' (2-point samples of a turn about z and a shift, for
+              scans whose z axis is up) or 'rigid' (3-point samples, any rotation).
+  sampling    SAMPLINGS, the upright estimator's matches and samples: 'compatible'
+              (matches both ways, samples among the pairs of matches that one turn
+              about z and shift can fit), 'uniform' (cloud 1's nearest neighbours,
+              uniform draws) or 'auto' (compatible with verify = 0, else uniform).
+  verify      RANSAC's this many distinct best poses checked against the clouds by ICP
+              (`verification`); 0 keeps RANSAC's best as it is.
+  bev         the bird's-eye-view search's this many best poses checked with them, where
+              they apply: upright estimator and verify > 0 (`bev_candidates`).
+  icp         point-to-plane ICP from the chosen pose (1 m, then 0.5 m).
+  draws       samplings of each ball the learned descriptor averages: None,
+              VERIFIED_DRAWS of VERIFIED_SAMPLES points where verify > 0, else the
+              model's own; 0 the model's own (`describing`).
+  voxel       metres of the grid each cloud is put on first (`to_grid`); None the
+              model's (0.2 m), 0 every point as given.
+  fpfh_max_nn FPFH's neighbour cap within its 4 m ball (0: none, the paper's).
+  seed        RANSAC's (and random keypoints') seed.
+  level       LEVELS: 'ground' (each scan whose ground is tilted by `leveling.MIN_TILT_DEG` or
+              more is first turned level about its sensor, `leveling`, and every pose
+              comes back in the scans' own frames; a pair with a scan of no ground keeps
+              its pose as given where verified clear, else is registered with FPFH and
+              RANSAC over any rotation, and notes say which) or
+              'none' (the clouds as given: z is taken to be up). `register_many` levels
+              each cloud once.
+  """
+  keypoints: str = 'auto'
+  descriptor: str = 'learned'
+  estimator: str = 'upright'
+  verify: int = 10
+  bev: int = 5
+  icp: bool = False
+  draws: int | None = None
+  voxel: float | None = None
+  fpfh_max_nn: int = features.FPFH_MAX_NN
+  seed: int = 0
+  level: str = 'ground'
+  sampling: str = 'auto'
+
+  def __post_init__(self):
+    for name, allowed in (('keypoints', KEYPOINTS), ('descriptor', DESCRIPTORS),
+                          ('estimator', ESTIMATORS), ('level', LEVELS),
+                          ('sampling', SAMPLINGS)):
+      if getattr(self, name) not in allowed:
+        raise errors.UserError(f'{name} must be one of {allowed}, got {getattr(self, name)!r}')
+    for name, meaning in (('verify', '0: no verification'), ('bev', '0: no BEV search'),
+                          ('fpfh_max_nn', '0: no cap'), ('draws', "0: the model's own"),
+                          ('voxel', '0: every point as given')):
+      value = getattr(self, name)
+      if value is not None and value < 0:
+        raise errors.UserError(f'{name} must be >= 0 ({meaning}), got {value}')
+
+  @classmethod
+  def paper(cls, descriptor: str = 'fpfh', **overrides) -> 'Options':
+    """The paper's protocol: ISS keypoints, RANSAC over any rotation, no verification,
+    the clouds as given."""
+    return cls(**{'keypoints': 'iss', 'descriptor': descriptor, 'estimator': 'rigid',
+                  'verify': 0, 'bev': 0, 'level': 'none', 'sampling': 'uniform',
+                  **overrides})
+
+  @property
+  def bev_candidates(self) -> int:
+    """The BEV search's poses checked: `bev` with the upright estimator and verify > 0
+    (its poses turn about z only and are checked with RANSAC's), else 0."""
+    return self.bev if self.estimator == 'upright' and self.verify > 0 else 0
+
+  @property
+  def needs_model(self) -> bool:
+    return self.descriptor == 'learned' or self.keypoints == 'learned'
+
+  def describing(self, model):
+    """`model` (an `inference.Model`) as these options describe with it (`draws`); None
+    where no model is needed; a UserError where one is needed and not given."""
+    if not self.needs_model:
+      return None
+    if model is None:
+      raise errors.UserError(f'{self.keypoints} keypoints + {self.descriptor} descriptors '
+                             "need a model (e.g. pretrained.load('ours'))")
+    if self.draws is None:
+      return verified_model(model) if self.verify > 0 else model
+    return dataclasses.replace(model, draws=self.draws) if self.draws else model
