@@ -59,13 +59,13 @@ def upright_samplings(pairs) -> None:
     for path in (pair.cloud1, pair.cloud2):
       if path not in cache:
         cache[path] = cloud_features.cloud_features(io.read_cloud(path), 'auto', 'fpfh',
-                                              fpfh_max_nn=200)
+                                                    fpfh_max_nn=200)
     for sampling in rows:
       times = []
       for _ in range(FLAGS.repeats):
         start = time.perf_counter()
         reg = pair_stages.estimate(cache[pair.cloud1], cache[pair.cloud2], seed=n,
-                                estimator='upright', sampling=sampling)
+                                   estimator='upright', sampling=sampling)
         times.append(time.perf_counter() - start)
       rows[sampling].append((float(np.median(times)), reg.trials,
                              metrics.registration_errors(pair.transform, reg.transform)['success']))

@@ -78,8 +78,8 @@ def _options(descriptor: str) -> options_lib.Options:
     raise errors.UserError("--bev needs --ransac=upright and --verify > 0 (its poses turn "
                            "about z only, and are checked with RANSAC's)")
   return options_lib.Options(FLAGS.keypoints, descriptor, FLAGS.ransac, FLAGS.verify, FLAGS.bev,
-                          FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed,
-                          FLAGS.level, FLAGS.sampling)
+                             FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed,
+                             FLAGS.level, FLAGS.sampling)
 
 
 def _read(path: str) -> np.ndarray:

@@ -71,6 +71,22 @@ def test_adapt_refuses_a_missing_folder(tmp_path):
       'error: --scans:'), run.stderr[-2000:]
 
 
+@pytest.mark.multiprocess
+@pytest.mark.parametrize('flag, message', [
+    ('--config.mining.widen_rounds=-1', 'error: --config.mining.widen_rounds must be 0 or more'),
+    ('--config.mining.max_scans=2', 'error: max_scans must be 3 or more')])
+def test_adapt_refuses_a_wrong_mining_setting(tmp_path, flag, message):
+  scans = tmp_path / 'drive'
+  scans.mkdir()
+  for k in range(3):
+    np.save(scans / f'{k}.npy', np.random.default_rng(k).uniform(-20, 20, (3000, 3)))
+  run = subprocess.run([sys.executable, '-m', 'experiments.adapt', f'--scans={scans}',
+                        f'--out={tmp_path / "o"}', flag], cwd=ROOT, capture_output=True,
+                       text=True, timeout=120)
+  assert run.returncode == 1 and run.stderr.strip().splitlines()[-1].startswith(message), \
+      run.stderr[-2000:]
+
+
 def _street(seed=0):
   """A flat ground (0.3 m grid, 60 x 60 m) with 8 walls 2-4 m high: [N, 3] metres."""
   rng = np.random.default_rng(seed)

@@ -99,9 +99,9 @@ def test_verification_with_bev_candidates_registers_where_every_ransac_pose_is_w
                     for a in (0.0, 0.5, 1.0)])
   f = cloud_features.CloudFeatures(cloud2[:10], np.eye(10), {})
   reg = pair_stages.Registration(wrong[0], np.stack([np.arange(10)] * 2, 1), np.zeros(10, bool),
-                              0, {}, candidates=wrong)
+                                 0, {}, candidates=wrong)
   assert not metrics.registration_errors(t_true, pair_stages.verify(reg, f, f, cloud1,
-                                                                 cloud2).transform)['success']
+                                                                    cloud2).transform)['success']
   verified = pair_stages.verify(reg, f, f, cloud1, cloud2, bev_candidates=3)
   assert len(verified.verified_fitness) == 6 and verified.seconds['bev'] > 0
   err = metrics.registration_errors(t_true, verified.transform)
@@ -118,7 +118,7 @@ def test_a_ransac_pose_that_fits_confidently_is_taken_without_the_bev_search(mon
   candidates = np.stack([off(8.0), off(0.3), off(-8.0)])
   f = cloud_features.CloudFeatures(cloud2[:10], np.eye(10), {})
   reg = pair_stages.Registration(candidates[0], np.stack([np.arange(10)] * 2, 1),
-                              np.zeros(10, bool), 0, {}, candidates=candidates)
+                                 np.zeros(10, bool), 0, {}, candidates=candidates)
   searches = []
   original = bev.search
   monkeypatch.setattr(bev, 'search', lambda *a, **k: searches.append(1) or original(*a, **k))

@@ -173,7 +173,7 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
   reg, _, _ = pipeline.register(target=c1, source=c2,
                                 options=options_lib.Options.paper(fpfh_max_nn=200))
   staged = pair_stages.estimate(cloud_features.cloud_features(c1, fpfh_max_nn=200),
-                             cloud_features.cloud_features(c2, fpfh_max_nn=200))
+                                cloud_features.cloud_features(c2, fpfh_max_nn=200))
   np.testing.assert_allclose(reg.transform, staged.transform, atol=1e-9)
   assert metrics.registration_errors(pair.transform, reg.transform)['success']
   centre = c1.mean(axis=0)
@@ -322,13 +322,14 @@ def test_upright_fit_is_exact_and_upright_ransac_finds_a_pose_at_few_inliers():
   err = metrics.registration_errors(t_tilt, res.transform)
   assert err['rte'] < 0.2 and err['rre_geodesic'] < 0.5 and res.inliers[~wrong].mean() > 0.9
   reg = pair_stages.estimate(cloud_features.CloudFeatures(dst, np.eye(400), {}),
-                          cloud_features.CloudFeatures(src, np.eye(400), {}), estimator='upright')
+                             cloud_features.CloudFeatures(src, np.eye(400), {}),
+                             estimator='upright')
   assert metrics.registration_errors(t_tilt, reg.transform)['success']
   assert 0 < reg.fitness <= 1 and reg.correspondence_set_size == round(reg.fitness * 400)
   assert 0 < reg.inlier_rmse < 1.0
   with pytest.raises(ValueError, match='estimator must be one of'):
     pair_stages.estimate(cloud_features.CloudFeatures(dst, np.eye(400), {}),
-                      cloud_features.CloudFeatures(src, np.eye(400), {}), estimator='affine')
+                         cloud_features.CloudFeatures(src, np.eye(400), {}), estimator='affine')
 
 
 @pytest.mark.real_data

@@ -218,8 +218,8 @@ def _registration_figures(name, ev, ctx: Context, set_name, pair, skipped) -> li
       continue
     f1, f2 = ctx.store.features(pair.cloud1, row), ctx.store.features(pair.cloud2, row)
     reg = pair_stages.estimate(f1, f2, seed=cfg.seed * 1_000_003,
-                            inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
-                            max_trials=cfg.max_trials)
+                               inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
+                               max_trials=cfg.max_trials)
     file = f'{name}_{set_name}_{row.replace("+", "_")}.png'
     viz.plot_registration(ctx.store.cloud(pair.cloud1), ctx.store.cloud(pair.cloud2),
                           f1.xyz[reg.matches[:, 0]], f2.xyz[reg.matches[:, 1]], reg.inliers,

@@ -249,7 +249,7 @@ class FeatureStore:
       if source in ('auto', 'structure'):
         domain = 'all' if source == 'auto' else source
         idx, self._coarse[key] = cloud_features.auto_keypoints(points, self.num_keypoints,
-                                                         domain=domain)
+                                                               domain=domain)
       elif source in BUILTIN_KEYPOINTS:
         # The protocol: a detector that finds too few keypoints fails the pair.
         idx, _ = cloud_features.compute_keypoints(points, source, seed=self.seed, fallback=False)
@@ -278,7 +278,7 @@ class FeatureStore:
         describe = lambda at: self._fpfh_together(path, sources, at)
       elif desc in BUILTIN_DESCRIPTORS:
         describe = lambda at: cloud_features.compute_descriptors(points, at, desc,
-                                                           fpfh_max_nn=self.fpfh_max_nn)
+                                                                 fpfh_max_nn=self.fpfh_max_nn)
       else:
         model = options_lib.verified_model(self._model(desc)) if verified else self._model(desc)
         describe = lambda at, model=model: inference.describe(
@@ -304,11 +304,11 @@ class FeatureStore:
     key = (str(path), sources)
     if features_lib.searched_on_grid(self.cloud(path)):   # FPFH there depends on the set
       return cloud_features.compute_descriptors(self.cloud(path), at, 'fpfh',
-                                          fpfh_max_nn=self.fpfh_max_nn)
+                                                fpfh_max_nn=self.fpfh_max_nn)
     if key not in self._fpfh:
       together = np.unique(np.concatenate([self.keypoints(path, s) for s in sources]))
       d = cloud_features.compute_descriptors(self.cloud(path), together, 'fpfh',
-                                       fpfh_max_nn=self.fpfh_max_nn)
+                                             fpfh_max_nn=self.fpfh_max_nn)
       self._fpfh[key] = ({int(i): n for n, i in enumerate(together)}, d)
     rows, d = self._fpfh[key]
     return d[[rows[int(i)] for i in at]]

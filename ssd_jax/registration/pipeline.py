@@ -122,7 +122,7 @@ def register(*, target: np.ndarray, source: np.ndarray, model=None,
   def levels_of(n, kind):
     stage(f'{names[n]}: keypoints')
     levels = cloud_features.feature_levels(local[n], kind, options.descriptor, model, options.seed,
-                            options.fpfh_max_nn, coarse)
+                                           options.fpfh_max_nn, coarse)
     levels.keypoints(0)
     stage(f'{names[n]}: descriptors')
     levels.levels[0]()   # the first level's, timed as this stage
