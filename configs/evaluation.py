@@ -23,8 +23,12 @@ def get_config() -> ml_collections.ConfigDict:
       'ours_rescan': 'ours_rescan',         # ours matching across sensors (configs/ours_rescan.py)
       'ours_mined': 'ours_mined',           # ours trained on mined pairs (configs/ours_mined.py)
   })
-  # keypoints+descriptor: keypoints iss | random | a checkpoint name (its detector);
-  # descriptors fpfh | a checkpoint name. The paper's Tables I/II and Fig. 4 rows:
+  # keypoints+descriptor[+estimator[+verify[+bev]]]: keypoints iss | random | auto |
+  # structure | a checkpoint name (its detector); descriptors fpfh | a checkpoint name;
+  # estimator rigid (the paper's) | upright. A row with 'verify' runs the register
+  # command's own path (`pipeline.Registrar` on the files); so do 'register',
+  # 'register_fpfh' and 'register_descriptor' (evaluation/feature_store.py,
+  # COMMAND_ROWS). The paper's Tables I/II and Fig. 4 rows:
   config.rows = ('iss+fpfh', 'iss+feat3dnet', 'iss+ours', 'feat3dnet+fpfh',
                  'feat3dnet+feat3dnet', 'feat3dnet+ours', 'ours_detector+fpfh',
                  'ours_detector+ours_detector')
@@ -34,7 +38,7 @@ def get_config() -> ml_collections.ConfigDict:
   config.confidence = 0.99
   config.max_trials = 10_000
   config.max_pairs = 0            # 0 = all pairs of every set (the first max_pairs otherwise)
-  config.seed = 0                 # RANSAC samples of pair n use seed * 1,000,003 + n
+  config.seed = 0                 # protocol rows: pair n's RANSAC seed * 1,000,003 + n
   config.fpfh_max_nn = 0          # neighbour cap of FPFH's 4 m searches (0: none, the paper's)
   config.num_keypoints = 1024     # farthest-point keypoints per cloud of the 'auto' rows
   # The upright rows' matches and samples (ssd_jax.registration.pipeline.SAMPLINGS): 'auto'

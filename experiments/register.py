@@ -157,14 +157,15 @@ def main(argv):
 
 def _register_pair(options, loaded, name: str, bar: cli.StageBar) -> None:
   voxel = cloud_features.voxel_size_of(loaded) if FLAGS.voxel is None else FLAGS.voxel
-  clouds, read_seconds = [], {}
-  for n, path in enumerate((FLAGS.cloud1, FLAGS.cloud2), 1):
+  clouds, read_seconds = [], {'read': 0.0, 'grid': 0.0}
+  for path in (FLAGS.cloud1, FLAGS.cloud2):
     bar.stage(f'reading {os.path.basename(path)}')
     t0 = time.perf_counter()
     cloud = _read(path)
     t1 = time.perf_counter()
     cloud, note = cloud_features.to_grid(cloud, voxel)   # float64 until register() centres it
-    read_seconds.update({f'cloud{n}_read': t1 - t0, f'cloud{n}_grid': time.perf_counter() - t1})
+    read_seconds['read'] += t1 - t0
+    read_seconds['grid'] += time.perf_counter() - t1
     if note:
       bar.say(f'voxel: {os.path.basename(path)}: {note}')
     clouds.append(cloud)

@@ -15,8 +15,9 @@ import pytest
 from ssd_jax import errors, geometry, inference, pretrained, train
 from ssd_jax.configs import paper_small
 from ssd_jax.configs.evals import registration as registration_config
-from ssd_jax.data import clusters, io, registration_sets
-from ssd_jax.registration import bev, cloud_features, features, verification
+from ssd_jax.data import clean, clusters, io, registration_sets
+from ssd_jax.registration import cloud_features, features, metrics, pipeline
+from ssd_jax.registration import options as options_lib
 from ssd_jax.evaluation import (descriptor_matching, evaluators, feature_store, fingerprint,
                                 learning_curve, orientation, precision, registration,
                                 repeatability)
@@ -415,10 +416,9 @@ def test_evaluate_reports_user_errors_in_one_line_and_keeps_a_bugs_traceback(
 
 @pytest.mark.real_data
 @pytest.mark.slow
-def test_feature_store_shares_work_between_rows_and_changes_no_result(tmp_path, monkeypatch):
-  """FPFH of two keypoint sets described together, learned clusters shared by models of
-  one setting, and a pair's BEV search and ICPs shared by the rows that register it:
-  each equals what the row computes alone."""
+def test_feature_store_shares_work_between_rows_and_changes_no_result(tmp_path):
+  """FPFH of two keypoint sets described together, and learned clusters shared by models
+  of one setting: each equals what the row computes alone."""
   scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
   scan = scan[np.linalg.norm(scan[:, :2], axis=1) < 30]
   scan, _ = cloud_features.to_grid(scan, 0.2)   # as every test set: FPFH over the cloud itself
@@ -439,18 +439,39 @@ def test_feature_store_shares_work_between_rows_and_changes_no_result(tmp_path, 
   np.testing.assert_array_equal(ours, twin)
   assert len(store._clusters) == 1   # the twin's clusters were the first model's
 
-  searches = []
-  search = bev.search
-  monkeypatch.setattr(bev, 'search', lambda *a, **k: searches.append(1) or search(*a, **k))
-  pair = registration_sets.RegistrationPair('x', 0, 1, paths[0], paths[1], turn)
-  rows = ['auto+fpfh+upright+verify+bev', 'auto+ours+upright+verify+bev']
-  monkeypatch.setattr(verification, 'CONFIDENT_FITNESS', 1.01)  # BEV every time
-  shared = registration.register_pairs([pair], rows, store, progress=False)
-  assert len(searches) == 1
-  for row in rows:
-    alone = registration.register_pairs([pair], [row], feature_store.FeatureStore(
-        {'ours': model}), progress=False)[row][0]
-    assert alone == shared[row][0] and alone['success']
+
+
+@pytest.mark.real_data
+@pytest.mark.slow
+def test_rows_of_the_register_command_register_as_the_command_does(tmp_path):
+  """Every row that verifies (the README's "defaults" rows) and each `COMMAND_ROWS` name
+  runs `pipeline.Registrar`: per pair, the errors, trials, inliers and verdict of the
+  pose `register_many` gives the same files with the same options."""
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
+  scan = scan[np.linalg.norm(scan[:, :2], axis=1) < 40]
+  paths, pairs = [str(tmp_path / 'a.npy')], []
+  np.save(paths[0], scan[::2])
+  for n, (yaw, shift) in enumerate(((40.0, [3.0, -2.0, 0.1]), (-120.0, [-4.0, 1.0, 0.0]))):
+    t = geometry.make_transform(geometry.rotation_z(np.radians(yaw)), np.array(shift))
+    paths.append(str(tmp_path / f'{n}.npy'))
+    np.save(paths[-1], (scan[1::2] - t[:3, 3]) @ t[:3, :3])
+    pairs.append(registration_sets.RegistrationPair('x', 0, n + 1, paths[0], paths[-1], t))
+  model = pretrained.load('ours')
+  rows = {'auto+ours+upright+verify+bev': (options_lib.Options(), model),
+          'register_fpfh': (options_lib.Options(descriptor='fpfh'), None),
+          'register_descriptor': (options_lib.Options(verify=0, bev=0), model)}
+  results = registration.register_pairs(pairs, list(rows), feature_store.FeatureStore(
+      {'ours': model}), progress=False)
+  for row, (options, m) in rows.items():
+    command = pipeline.register_many([(p.cloud1, p.cloud2) for p in pairs], clean.read_metres,
+                                     model=m, options=options, say=lambda line: None)
+    for pair, got, want in zip(pairs, results[row], command):
+      reg = want.registration
+      expected = {**metrics.registration_errors(pair.transform, reg.transform),
+                  'trials': reg.trials, 'inliers': int(reg.inliers.sum()),
+                  **reg.verdict.to_json()}
+      assert {k: got[k] for k in expected} == expected, row
+      assert got['success'], (row, got)
 
 
 def test_feature_store_takes_as_many_farthest_point_keypoints_as_asked(tmp_path):

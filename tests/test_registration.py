@@ -164,9 +164,9 @@ def test_fpfh_follows_the_keypoint_order():
 
 
 def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
-  """UTM-scale float64 clouds are centred in float64 before any float32 step: the pair
-  centred on cloud 1 lands the same way at x = 4.5e5, y = 5.4e6 as near the origin, and
-  T comes back in the caller's coordinates. Clouds near the origin are not shifted."""
+  """UTM-scale float64 clouds are centred in float64 before any float32 step, each on its
+  centroid: the pair registers as accurately at x = 4.5e5, y = 5.4e6 as near the origin,
+  and T comes back in the caller's coordinates. Clouds near the origin are not shifted."""
   pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
   c1, c2 = (io.read_cloud(p).astype(np.float64) for p in (pair.cloud1, pair.cloud2))
   # As scanned (sensor at the origin): exactly the stage-by-stage result, no shift.
@@ -188,7 +188,7 @@ def test_register_far_from_origin_is_as_accurate_as_near_it(synthetic_root):
     assert np.abs(f1.xyz - offset).max() < 100   # keypoints in the caller's coordinates
   near, far = errors
   assert np.median(near) < 0.5, np.median(near)
-  np.testing.assert_allclose(far, near, atol=0.01)
+  assert abs(np.percentile(far, 95) - np.percentile(near, 95)) < 0.05, (far, near)
 
 
 def test_pipeline_refuses_bad_clouds_with_one_line():
@@ -361,15 +361,18 @@ def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root
   dense = [np.repeat(c, 12, axis=0) + rng.normal(0, 0.03, (12 * len(c), 3)) for c in (c1, c2)]
   options = options_lib.Options(descriptor='fpfh', verify=0, icp=True)
   reg, f1, f2 = pipeline.register(target=c1, source=c2, options=options)
-  assert 'used as given' in f1.grid and 'used as given' in f2.grid
+  assert [n for n in reg.notes if 'used as given' in n] == [
+      f'voxel: cloud {n}: {len(c):,} points, no denser than the 0.2 m grid: used as given'
+      for n, c in ((1, c1), (2, c2))]
   stages = []
   reg_d, g1, g2 = pipeline.register(target=dense[0], source=dense[1], options=options,
                                     progress=stages.append)
-  assert stages == ['cloud 1: grid', 'cloud 2: grid', 'cloud 1: keypoints',
-                    'cloud 1: descriptors', 'cloud 2: keypoints', 'cloud 2: descriptors',
+  assert stages == ['cloud 1: grid', 'cloud 1: keypoints', 'cloud 1: descriptors',
+                    'cloud 2: grid', 'cloud 2: keypoints', 'cloud 2: descriptors',
                     'RANSAC', 'ICP']
-  assert g1.grid == f'{len(dense[0]):,} -> {g1.grid.split()[2]} points on the 0.2 m grid'
-  assert int(g1.grid.split()[2].replace(",", "")) < 2 * len(c1)   # vs 12x as given
+  gridded = reg_d.notes[0].split()
+  assert reg_d.notes[0] == f'voxel: cloud 1: {len(dense[0]):,} -> {gridded[5]} points on the 0.2 m grid'
+  assert int(gridded[5].replace(",", "")) < 2 * len(c1)   # vs 12x as given
   assert metrics.registration_errors(pair.transform, reg.transform)['success']
   diff = geometry.invert_transform(reg.transform) @ reg_d.transform
   assert np.linalg.norm(diff[:3, 3]) < 0.05

@@ -52,7 +52,7 @@ def check_cloud(points: np.ndarray, name: str = 'cloud', dtype=np.float32) -> np
   problem = _resolution_problem(points, dtype)
   if problem:
     raise ValueError(f'{name}: {problem}; subtract an offset first '
-                     '(registration.pipeline.register centres both clouds in float64)')
+                     '(registration.pipeline.register centres each cloud in float64)')
   return points.astype(dtype, copy=False)
 
 

@@ -22,9 +22,7 @@ from tqdm import auto as tqdm
 
 from ssd_jax import distributed, errors
 from ssd_jax.evaluation import feature_store, registration, tables
-from ssd_jax.data import clean
-from ssd_jax.registration import metrics, pipeline, reference, verification
-from ssd_jax.registration import options as options_lib
+from ssd_jax.registration import metrics, reference, verification
 
 # Rows that register whole clouds, without the project's keypoints and descriptors:
 # Open3D's own pipeline (the outside reference), and the bird's-eye-view search alone,
@@ -36,19 +34,7 @@ KISS_ROW = 'kiss_matcher'
 CLOUD_ROWS = {REFERENCE_ROW: 'Open3D ISS + FPFH (paper searches)',
               BEV_ROW: 'BEV search alone, verified',
               KISS_ROW: 'KISS-Matcher + ICP (0.3 m voxels)'}
-# Rows run through the register command's own path (`pipeline.register_many` on the set's
-# files, each cloud read and gridded as the command reads it, the pose in the files'
-# frames, with its verdict): the command's defaults with `ours` and with FPFH, and
-# `ours` alone (--verify=0 --bev=0).
-COMMAND_ROWS = {'register': ('register defaults, ours', {}),
-                'register_fpfh': ('register defaults, FPFH', {'descriptor': 'fpfh'}),
-                'register_descriptor': ('descriptor alone (--verify=0 --bev=0), ours',
-                                        {'verify': 0, 'bev': 0})}
-
-
 def label(row: str) -> str:
-  if row in COMMAND_ROWS:
-    return COMMAND_ROWS[row][0]
   return CLOUD_ROWS.get(row) or feature_store.row_label(row)
 
 
@@ -64,7 +50,7 @@ def _register_clouds(row: str, store: feature_store.FeatureStore, pair, seed: in
   if row == KISS_ROW:
     return reference.kiss_matcher_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2)), {
         'inliers': 0, 'matches': 0}
-  prepared = store.pair(pair.cloud1, pair.cloud2)   # shared with the verified rows
+  prepared = store.pair(pair.cloud1, pair.cloud2)
   best, refined, _ = verification.verify(prepared.cloud1.target, prepared.cloud2.source,
                                          prepared.bev_poses(feature_store.BEV_CANDIDATES),
                                          memo=prepared.memo)
@@ -103,34 +89,6 @@ def register_clouds(pairs: Sequence, store: feature_store.FeatureStore,
     for res in results:
       log.write(json.dumps(res) + '\n')
   return list(results)
-
-
-def register_command(pairs: Sequence, row: str, model, *, log: TextIO | None = None,
-                     progress: bool = True, desc: str = 'register') -> list[dict]:
-  """One of `COMMAND_ROWS` on every pair (`registration_sets.RegistrationPair`s, T_12 in
-  the files' frames), through `pipeline.register_many` as the register command runs them
-  (`model`: the `inference.Model` its learned rows describe with) -> per-pair results in
-  `registration.register_pairs`' layout, with the verdict (`verdict.Verdict.to_json`) and
-  the seconds the pair cost in the batch."""
-  options = options_lib.Options(**COMMAND_ROWS[row][1])
-  stream = pipeline.register_many([(p.cloud1, p.cloud2) for p in pairs], clean.read_metres,
-                                  model=model, options=options, say=lambda line: None)
-  out = []
-  for pair, r in tqdm.tqdm(zip(pairs, stream), total=len(pairs), desc=desc, unit='pair',
-                           disable=not progress):
-    res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2,
-           'seconds': r.seconds}
-    if r.error:
-      res.update(registration.failed(r.error))
-    else:
-      reg = r.registration
-      res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
-                 **reg.verdict.to_json(),
-                 **metrics.registration_errors(pair.transform, reg.transform))
-    if log is not None:
-      log.write(json.dumps(res) + '\n')
-    out.append(res)
-  return out
 
 
 def distance_bin(distance: float, bins: Sequence[Sequence[float]]) -> str | None:

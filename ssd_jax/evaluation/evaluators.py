@@ -113,16 +113,12 @@ def _cross_sensor(name, ev, ctx: Context) -> Section:
                        registration_sets.read_pair_info(path))
   path, (pairs, info) = ctx.find(ev.dataset, read, 'cross-sensor set')
   pairs = pairs[:ctx.config.max_pairs] if ctx.config.max_pairs else pairs
-  as_written, pairs = pairs, ctx.store.in_levelled_frames(pairs)
+  pairs = ctx.store.in_levelled_frames(pairs)
   cfg, rows = ctx.config, list(ev.rows)
   missing = dict(ctx.missing)
   if cross_sensor.KISS_ROW in rows and reference.kiss_matcher is None:
     missing[cross_sensor.KISS_ROW] = reference.KISS_MISSING
-  if 'ours' in ctx.missing:
-    missing.update({r: ctx.missing['ours'] for r in cross_sensor.COMMAND_ROWS
-                    if r != 'register_fpfh'})
-  store_rows = [r for r in rows
-                if r not in cross_sensor.CLOUD_ROWS and r not in cross_sensor.COMMAND_ROWS]
+  store_rows = [r for r in rows if r not in cross_sensor.CLOUD_ROWS]
   with open(ctx.workdir / f'{name}_pairs.jsonl', 'w') as log:
     results = registration.register_pairs(
         pairs, feature_store.runnable_rows(store_rows, ctx.missing), ctx.store, seed=cfg.seed,
@@ -132,10 +128,6 @@ def _cross_sensor(name, ev, ctx: Context) -> Section:
     for row in (r for r in rows if r in cross_sensor.CLOUD_ROWS and r not in missing):
       results[row] = cross_sensor.register_clouds(pairs, ctx.store, row, seed=cfg.seed, log=log,
                                                   desc=f'{name} {row}')
-    for row in (r for r in rows if r in cross_sensor.COMMAND_ROWS and r not in missing):
-      model = None if row == 'register_fpfh' else ctx.store.models['ours']
-      results[row] = cross_sensor.register_command(as_written, row, model, log=log,
-                                                   desc=f'{name} {row}')
   units = list(dict.fromkeys(info[p.idx1, p.idx2]['sensor2'] for p in pairs))
   overlap_bins = ev.get('overlap_bins', ())
   cells = cross_sensor.matrix(results, info, ev.distance_bins, overlap_bins)
@@ -252,11 +244,8 @@ EVALUATORS = {
                                      lambda config, ev: [f'iss+{d}' for d in ev.descriptors]),
     'figures': Evaluator(_figures, lambda config, ev: list(ev.registration_rows) + [
         f'{s}+fpfh' for s in ev.keypoint_sources]),
-    # The register command's rows describe with `ours` (a row naming it loads it).
     'cross_sensor': Evaluator(_cross_sensor, lambda config, ev: [
-        r for r in ev.rows if r not in cross_sensor.CLOUD_ROWS
-        and r not in cross_sensor.COMMAND_ROWS] + (
-            ['auto+ours'] if set(ev.rows) & set(cross_sensor.COMMAND_ROWS) else [])),
+        r for r in ev.rows if r not in cross_sensor.CLOUD_ROWS]),
 }
 TYPES = tuple(EVALUATORS)
 

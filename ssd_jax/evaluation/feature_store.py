@@ -53,13 +53,24 @@ CLUSTERS_KEPT = 8
 
 # A row's part 'verify': RANSAC's distinct best poses checked against the clouds
 # (`pair_stages.verify`), this many; its part 'bev' (after 'verify'): the bird's-eye-view
-# search's best poses checked with them (`bev.search`), this many.
+# search's best poses checked with them (`bev.search`), this many. A row that verifies
+# runs the register command's own path (`command_options`).
 VERIFY_CANDIDATES = 10
 BEV_CANDIDATES = 5
+# Rows named after the register command: its defaults with `ours` and with FPFH, and
+# `ours` alone -> (label, descriptor, the `options.Options` fields that differ).
+COMMAND_ROWS = {'register': ('register defaults, ours', 'ours', {}),
+                'register_fpfh': ('register defaults, FPFH', 'fpfh', {}),
+                'register_descriptor': ('descriptor alone (--verify=0 --bev=0), ours', 'ours',
+                                        {'verify': 0, 'bev': 0})}
 
 
 def _parts(row: str) -> tuple[list[str], str, bool, bool]:
   """-> ([keypoints, descriptor], estimator, verify, bev), or a clear error."""
+  if row in COMMAND_ROWS:
+    _, desc, fields = COMMAND_ROWS[row]
+    verify = fields.get('verify', VERIFY_CANDIDATES) > 0
+    return ['auto', desc], 'upright', verify, verify
   parts = row.split('+')
   bev = len(parts) == 5 and parts[4] == 'bev'
   if bev:
@@ -79,9 +90,35 @@ def _parts(row: str) -> tuple[list[str], str, bool, bool]:
 
 
 def split_row(row: str) -> tuple[str, str]:
-  """'iss+fpfh' (or 'iss+fpfh+upright', 'auto+fpfh+upright+verify') -> ('iss', 'fpfh')."""
+  """'iss+fpfh' (or 'iss+fpfh+upright', 'auto+fpfh+upright+verify') -> ('iss', 'fpfh');
+  a `COMMAND_ROWS` name -> ('auto', its descriptor)."""
   (kp, desc), _, _, _ = _parts(row)
   return kp, desc
+
+
+def command_options(row: str, models: Mapping) -> tuple[options_lib.Options, object] | None:
+  """(the register command's options, the `inference.Model` or None) a row registers
+  with through `pipeline.Registrar`: a `COMMAND_ROWS` name, or a row that verifies its
+  poses (its keypoints 'auto', or 'structure' with a learned descriptor: the model's
+  `keypoints`; its estimator; VERIFY_CANDIDATES; BEV_CANDIDATES with 'bev'). None for a
+  row of the paper's protocol, registered from this store's features. models: {name:
+  `inference.Model`} holding the row's descriptor."""
+  kp, desc = split_row(row)
+  if row in COMMAND_ROWS:
+    fields = COMMAND_ROWS[row][2]
+  elif row_verifies(row):
+    if kp not in ('auto', 'structure') or (kp == 'structure' and desc in BUILTIN_DESCRIPTORS):
+      raise errors.UserError(f'row {row!r}: a row that verifies registers as the register '
+                             "command does, from 'auto' keypoints (or 'structure' with a "
+                             'learned descriptor)')
+    fields = {'estimator': row_estimator(row), 'verify': VERIFY_CANDIDATES,
+              'bev': row_bev_candidates(row)}
+  else:
+    return None
+  if desc in BUILTIN_DESCRIPTORS:
+    return options_lib.Options(descriptor=desc, **fields), None
+  model = dataclasses.replace(models[desc], keypoints='all' if kp == 'auto' else kp)
+  return options_lib.Options(**fields), model
 
 
 def row_estimator(row: str) -> str:
@@ -101,6 +138,8 @@ def row_bev_candidates(row: str) -> int:
 
 
 def row_label(row: str) -> str:
+  if row in COMMAND_ROWS:
+    return COMMAND_ROWS[row][0]
   kp, desc = split_row(row)
   suffix = ', upright RANSAC' if row_estimator(row) == 'upright' else ''
   if row_verifies(row):
@@ -174,8 +213,6 @@ class FeatureStore:
     self._fpfh = {}   # (path, sources) -> ({point index: row}, FPFH [M, 33]) of their keypoints
     self.seconds = collections.defaultdict(float)
     self._clouds, self._keypoints, self._descriptors = {}, {}, {}
-    # (path, 'auto' or 'structure') -> positions of the coarse level in those keypoints
-    self._coarse = {}
     self._pair_memos = {}   # (path 1, path 2) -> `prepared.PreparedPair.memo`
     # The last few clouds' learned-descriptor clusters, which every model of one radius,
     # cluster size and draw count shares (`inference.neighbourhoods`): ~2 MB a cloud.
@@ -201,15 +238,20 @@ class FeatureStore:
     self.cloud(path)
     return self._levelings.get(str(path), leveling.unchanged())
 
-  def in_levelled_frames(self, pairs: Sequence) -> list:
-    """`registration_sets.RegistrationPair`s with T_12 between the clouds as `cloud` gives
-    them: L1 T_12 L2^-1 where the store levels (the same pairs otherwise). The levelling
-    turns each scan about its sensor, so RTE and the geodesic RRE of a pose are the same
-    in either pair of frames."""
+  def in_levelled_frame(self, path1: str | os.PathLike, path2: str | os.PathLike,
+                        transform: np.ndarray) -> np.ndarray:
+    """T_12 [4, 4] between the files' frames -> between the clouds as `cloud` gives them:
+    L1 T_12 L2^-1 where the store levels (the same otherwise). The levelling turns each
+    scan about its sensor, so RTE and the geodesic RRE of a pose are the same in either
+    pair of frames."""
     if self.level == 'none':
-      return list(pairs)
-    return [dataclasses.replace(p, transform=self.leveling(p.cloud1).matrix @ p.transform
-                                @ np.linalg.inv(self.leveling(p.cloud2).matrix))
+      return transform
+    return self.leveling(path1).matrix @ transform @ np.linalg.inv(self.leveling(path2).matrix)
+
+  def in_levelled_frames(self, pairs: Sequence) -> list:
+    """`registration_sets.RegistrationPair`s with T_12 `in_levelled_frame`."""
+    return [dataclasses.replace(p, transform=self.in_levelled_frame(p.cloud1, p.cloud2,
+                                                                    p.transform))
             for p in pairs]
 
   def prepared(self, path: str | os.PathLike) -> prepared_lib.PreparedCloud:
@@ -235,8 +277,8 @@ class FeatureStore:
 
   def pair(self, path1: str | os.PathLike, path2: str | os.PathLike
            ) -> prepared_lib.PreparedPair:
-    """Cloud 1 and cloud 2 of a pair (`prepared`), with what every row that registers the
-    pair shares: the BEV search's poses and each verification ICP, kept for every pair."""
+    """Cloud 1 and cloud 2 of a pair (`prepared`), with the BEV search's poses and each
+    verification ICP, kept for every pair."""
     memo = self._pair_memos.setdefault((str(path1), str(path2)), {})
     return prepared_lib.PreparedPair(self.prepared(path1), self.prepared(path2), memo)
 
@@ -248,8 +290,7 @@ class FeatureStore:
       t0 = time.perf_counter()
       if source in ('auto', 'structure'):
         domain = 'all' if source == 'auto' else source
-        idx, self._coarse[key] = cloud_features.auto_keypoints(points, self.num_keypoints,
-                                                               domain=domain)
+        idx, _ = cloud_features.auto_keypoints(points, self.num_keypoints, domain=domain)
       elif source in BUILTIN_KEYPOINTS:
         # The protocol: a detector that finds too few keypoints fails the pair.
         idx, _ = cloud_features.compute_keypoints(points, source, seed=self.seed, fallback=False)
@@ -259,18 +300,10 @@ class FeatureStore:
       self._keypoints[key] = idx
     return self._keypoints[key]
 
-  def levels(self, path: str | os.PathLike, row: str) -> list:
-    """The feature levels a row registers `path` with (`pair_stages.coarse_to_fine`): for a
-    row that verifies its poses with farthest-point keypoints, as the register command's
-    defaults do, the coarse level, then all; else all. A learned descriptor of a row
-    that verifies describes as those defaults do (`options.verified_model`:
-    VERIFIED_DRAWS samplings of VERIFIED_SAMPLES points). Each descriptor is computed
-    once, when a level first needs it."""
+  def features(self, path: str | os.PathLike, row: str) -> cloud_features.CloudFeatures:
+    """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud, each computed once."""
     kp, desc = split_row(row)
-    verified = row_verifies(row) and desc not in BUILTIN_DESCRIPTORS
-    name = (f'{desc}@draws={options_lib.VERIFIED_DRAWS},c={options_lib.VERIFIED_SAMPLES}'
-            if verified else desc)
-    key = (str(path), kp, name)
+    key = (str(path), kp, desc)
     if key not in self._descriptors:
       points, idx = self.cloud(path), self.keypoints(path, kp)
       sources = self.fpfh_keypoints
@@ -280,21 +313,12 @@ class FeatureStore:
         describe = lambda at: cloud_features.compute_descriptors(points, at, desc,
                                                                  fpfh_max_nn=self.fpfh_max_nn)
       else:
-        model = options_lib.verified_model(self._model(desc)) if verified else self._model(desc)
-        describe = lambda at, model=model: inference.describe(
+        describe = lambda at, model=self._model(desc): inference.describe(
             model, points, points[at], clusters=self._clusters_of(path, model, at))
-
-      def timed(at, describe=describe, stage=f'descriptors:{name}'):
-        t0 = time.perf_counter()
-        d = describe(at)
-        self.seconds[stage] += time.perf_counter() - t0
-        return d
-
-      coarse = self._coarse.get((str(path), kp))
-      self._descriptors[key] = cloud_features.FeatureLevels(
-          points, [idx] if coarse is None else [idx[coarse], idx], timed)
-    levels = self._descriptors[key]
-    return levels.levels if row_verifies(row) else levels.levels[-1:]
+      t0 = time.perf_counter()
+      self._descriptors[key] = cloud_features.CloudFeatures(points[idx], describe(idx), {})
+      self.seconds[f'descriptors:{desc}'] += time.perf_counter() - t0
+    return self._descriptors[key]
 
   def _fpfh_together(self, path: str | os.PathLike, sources: tuple[str, ...],
                      at: np.ndarray) -> np.ndarray:
@@ -326,11 +350,6 @@ class FeatureStore:
         self._clusters.popitem(last=False)
     return self._clusters[key]
 
-  def features(self, path: str | os.PathLike, row: str) -> cloud_features.CloudFeatures:
-    """Keypoints [K, 3] and descriptors [K, D] of a row on one cloud: all of its
-    keypoints (`levels`)."""
-    return self.levels(path, row)[-1]()
-
   def file_digests(self) -> dict[str, dict[str, str]]:
     """{stage: {file: digest}} of what this store computed: the clouds as read, the
     keypoints of each source, the descriptors of each row. The stores of several
@@ -338,9 +357,9 @@ class FeatureStore:
     out = {'clouds (as read)': {k: fingerprint.digest([v]) for k, v in self._clouds.items()}}
     for (path, source), idx in self._keypoints.items():
       out.setdefault(f'keypoints: {source}', {})[path] = fingerprint.digest([idx])
-    for (path, kp, desc), levels in self._descriptors.items():
+    for (path, kp, desc), f in self._descriptors.items():
       out.setdefault(f'descriptors: {kp}+{desc}', {})[path] = fingerprint.digest(
-          [levels.described()])
+          [f.descriptors])
     return out
 
   def fingerprints(self, file_digests: Mapping[str, Mapping[str, str]] | None = None,

@@ -3,7 +3,9 @@ pair, summarised as the paper does (docs/method.md §4)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import time
 from typing import Mapping, Sequence, TextIO
 
 import jax
@@ -13,8 +15,7 @@ from tqdm import auto as tqdm
 from ssd_jax import distributed, errors, geometry
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import feature_store, paper, tables
-from ssd_jax.registration import metrics
-from ssd_jax.registration import pair_stages
+from ssd_jax.registration import metrics, pair_stages, pipeline
 from ssd_jax.registration import options as options_lib
 
 
@@ -42,39 +43,46 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
                    sampling: str = 'auto') -> dict[str, list[dict]]:
   """Register every pair with every row -> {row: [per-pair result]}.
 
-  pairs: `registration_sets.RegistrationPair`s; `sampling`: the upright rows' matches and
-  samples (`options.SAMPLINGS`). Pair n's RANSAC samples are seeded with
-  seed * 1,000,003 + n, so a row's numbers do not depend on the other rows. Each
-  result holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair
-  with fewer than 3 keypoints in a cloud fails, with its `error`); a verified row's also
-  its verdict (`verdict.Verdict.to_json`: `registered`, the `reason` its pose is not to be
-  trusted, '' where it is, and what was measured; `pair_stages.assess`). With `log`, one
-  JSON line per pair and row is written to it. Over several processes each registers its
-  share of the pairs (`distributed.map_items`) and every process returns all results; the
-  log is written when they are gathered.
+  pairs: `registration_sets.RegistrationPair`s, T_12 between the clouds as `store` gives
+  them. A row of the register command (`feature_store.command_options`: every row that
+  verifies its poses) runs its path, `pipeline.Registrar` on the pairs' files with RANSAC
+  seeded with `seed`, and gives its verdict (`verdict.Verdict.to_json`) and the seconds
+  the pair cost; a row of the paper's protocol registers the store's features
+  (`pair_stages.estimate`, `sampling` as there), pair n's RANSAC seeded with
+  seed * 1,000,003 + n, so that its numbers do not depend on the other rows. Each result
+  holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair with
+  fewer than 3 keypoints in a cloud fails, with its `error`). With `log`, one JSON line per
+  pair and row is written to it. Over several processes each registers its share of the
+  pairs (`distributed.map_items`) and every process returns all results; the log is
+  written when they are gathered.
   """
   if sampling not in options_lib.SAMPLINGS:
     raise errors.UserError(f'sampling must be one of {options_lib.SAMPLINGS}, got {sampling!r}')
   one_process = jax.process_count() == 1
   store.describe_fpfh_together(rows)
+  registrars = {}
+  for row in rows:
+    command = feature_store.command_options(row, store.models)
+    if command is not None:
+      options, model = command
+      registrars[row] = pipeline.Registrar(clean.read_metres, model=model,
+                                           options=dataclasses.replace(options, seed=seed),
+                                           say=lambda line: None)
 
   def register(n: int, pair) -> list[dict]:
     out = []
     for row in rows:
       res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
+      t0 = time.perf_counter()
       try:
-        verify = feature_store.row_verifies(row)
-        prepared = store.pair(pair.cloud1, pair.cloud2)
-        reg, _, _ = pair_stages.coarse_to_fine(
-            store.levels(pair.cloud1, row), store.levels(pair.cloud2, row), prepared,
-            seed=seed * 1_000_003 + n, inlier_threshold=inlier_threshold,
-            confidence=confidence, max_trials=max_trials,
-            estimator=feature_store.row_estimator(row),
-            candidates=feature_store.VERIFY_CANDIDATES if verify else 1,
-            bev_candidates=feature_store.row_bev_candidates(row), verified=verify,
-            sampling=sampling)
-        if verify:   # the verdict, as the register command gives it
-          reg = pair_stages.assess(reg, prepared)
+        if row in registrars:
+          reg, _, _ = registrars[row].register(str(pair.cloud1), str(pair.cloud2))
+          reg.transform = store.in_levelled_frame(pair.cloud1, pair.cloud2, reg.transform)
+        else:
+          reg = pair_stages.estimate(
+              store.features(pair.cloud1, row), store.features(pair.cloud2, row),
+              seed * 1_000_003 + n, inlier_threshold, confidence, max_trials,
+              feature_store.row_estimator(row), sampling=sampling)
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named
       except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,
@@ -82,7 +90,7 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
         res.update(failed(str(e)))
       else:
         res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
-                   levels=reg.levels_tried,
+                   levels=reg.levels_tried, seconds=time.perf_counter() - t0,
                    **metrics.registration_errors(pair.transform, reg.transform))
         if reg.verdict is not None:
           res.update(reg.verdict.to_json())

@@ -45,7 +45,6 @@ class CloudFeatures:
   descriptors: np.ndarray  # [K, D]
   seconds: dict
   note: str = ''           # the keypoint fallback used, if any (one line)
-  grid: str = ''           # what `to_grid` did (one line), if it ran
 
 
 class FeatureLevels:
@@ -65,11 +64,11 @@ class FeatureLevels:
 
   def __init__(self, points: np.ndarray, levels: Sequence,
                describe: Callable[[np.ndarray], np.ndarray],
-               offset: np.ndarray | None = None, note: str = '', grid: str = '',
+               offset: np.ndarray | None = None, note: str = '',
                seconds: dict | None = None):
     self._points, self._levels, self._describe = points, list(levels), describe
     self._offset = np.zeros(3) if offset is None else np.asarray(offset, np.float64)
-    self.note, self.grid = note, grid
+    self.note = note
     self.seconds = {'keypoints': 0.0, 'descriptors': 0.0, **(seconds or {})}
     # The points described so far (sorted indices [k]) and their descriptors [k, D].
     self._known = np.zeros(0, np.int64)
@@ -103,7 +102,7 @@ class FeatureLevels:
       self.seconds['descriptors'] += time.perf_counter() - t0
     xyz = np.asarray(self._points)[idx].astype(np.float64) + self._offset
     rows = np.searchsorted(self._known, idx)
-    return CloudFeatures(xyz, self._descriptors[rows], self.seconds, self.note, self.grid)
+    return CloudFeatures(xyz, self._descriptors[rows], self.seconds, self.note)
 
   @property
   def levels(self) -> list[Callable[[], CloudFeatures]]:
@@ -198,7 +197,7 @@ def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str =
   detector finds fewer than 3 keypoints."""
   points = check_cloud(points)
   t0 = time.perf_counter()
-  points, grid = to_grid(points, voxel_size_of(model) if voxel is None else voxel)
+  points, _ = to_grid(points, voxel_size_of(model) if voxel is None else voxel)
   t1 = time.perf_counter()
   if progress is not None:
     progress('keypoints')
@@ -212,7 +211,7 @@ def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str =
   desc = compute_descriptors(points, idx, descriptor, model, fpfh_max_nn=fpfh_max_nn)
   t3 = time.perf_counter()
   return CloudFeatures(points[idx], desc,
-                       {'grid': t1 - t0, 'keypoints': t2 - t1, 'descriptors': t3 - t2}, note, grid)
+                       {'grid': t1 - t0, 'keypoints': t2 - t1, 'descriptors': t3 - t2}, note)
 
 
 def domain_of(model) -> str:

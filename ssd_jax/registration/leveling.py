@@ -219,12 +219,14 @@ def from_gravity(gravity, center: np.ndarray | None = None) -> Leveling:
 MIN_TILT_DEG = 3.0
 
 
-def level_clouds(clouds, offset: np.ndarray, mode: str, names) -> tuple[list[Leveling], list[str]]:
-  """Each cloud's `Leveling` (in its coordinates less `offset` [3]) where `mode` ('none'
-  or 'ground', `options.LEVELS`) asks for it, and the one-line notes of what was done."""
+def level_clouds(clouds, mode: str, names, sensor_at_origin: bool = True
+                 ) -> tuple[list[Leveling], list[str]]:
+  """Each cloud's `Leveling` (about its own coordinates' origin, the sensor's where
+  `sensor_at_origin`) where `mode` ('none' or 'ground', `options.LEVELS`) asks for it,
+  and the one-line notes of what was done."""
   if mode == 'none':
     return [unchanged() for _ in clouds], []
-  found = [level(c - offset, min_tilt_deg=MIN_TILT_DEG, sensor_at_origin=not offset.any())
+  found = [level(c, min_tilt_deg=MIN_TILT_DEG, sensor_at_origin=sensor_at_origin)
            for c in clouds]
   notes = []
   for name, lv in zip(names, found):

@@ -182,8 +182,7 @@ def pair_json(reg: pair_stages.Registration, f1: cloud_features.CloudFeatures,
          'points': list(points), 'correspondence_set_size': reg.correspondence_set_size,
          'draws': model.draws if learned else None,
          'num_samples': model.num_samples if learned else None,
-         'seconds': {**{f'cloud1_{k}': v for k, v in f1.seconds.items()},
-                     **{f'cloud2_{k}': v for k, v in f2.seconds.items()}, **reg.seconds}}
+         'seconds': dict(reg.seconds)}
   if reg.verified_fitness is not None:
     out['verified_fitness'] = reg.verified_fitness.tolist()
   out['registered'] = reg.verdict.registered

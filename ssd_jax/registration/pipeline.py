@@ -84,72 +84,17 @@ def register(*, target: np.ndarray, source: np.ndarray, model=None,
 
   target [N1, 3] and source [N2, 3] metres, any float type and coordinates; model: an
   `inference.Model` where `options` need one (default `Options()`, the register
-  command's). Clouds that float32 cannot resolve to MAX_RESOLUTION (e.g. UTM
-  coordinates) are shifted by one common offset, the target's centroid in float64,
-  before any float32 step; T_12 and the keypoints come back in the input coordinates.
-  Each cloud is put on the options' grid first (`to_grid`; each feature's `grid` says
-  what was done). `progress(stage)`, if given, is called as each stage starts.
+  command's). A two-cloud `Registrar`: the same path as `register_many`, its one-line
+  notes (grid, levelling, keypoint fallbacks) in the registration's `notes`.
+  `progress(stage)`, if given, is called as each stage starts.
   -> (registration, features of the target, features of the source).
   """
-  options = options_lib.Options() if options is None else options
-  model = options.describing(model)
-  clouds = [check_cloud(p, name, np.float64) for p, name in ((target, 'cloud 1'),
-                                                             (source, 'cloud 2'))]
-  offset = cloud_features.local_origin(clouds[0], clouds[1])
-  voxel = cloud_features.voxel_size_of(model) if options.voxel is None else options.voxel
-  stage = (lambda name: None) if progress is None else progress
-  names = ('cloud 1', 'cloud 2')
-  level, notes = leveling.level_clouds(clouds, offset, options.level, names)
-  groundless = any(lv.note for lv in level)
-
-  def any_rotation():
-    reg, f1, f2 = register(target=target, source=source, model=model,
-                           options=_any_rotation(options), progress=progress)
-    reg.notes = notes + [ANY_ROTATION_NOTE] + reg.notes
-    return reg, f1, f2
-
-  if groundless and not options.verify:
-    return any_rotation()
-  local, grids = [], []
-  for c, lv, name in zip(clouds, level, names):
-    stage(f'{name}: grid')
-    t0 = time.perf_counter()
-    cloud, grid = cloud_features.to_grid(check_cloud(lv.apply(c - offset), name), voxel)
-    local.append(cloud)
-    grids.append((grid, time.perf_counter() - t0))
-  coarse = cloud_features.coarse_keypoints(options.verify > 0)
-
-  def levels_of(n, kind):
-    stage(f'{names[n]}: keypoints')
-    levels = cloud_features.feature_levels(local[n], kind, options.descriptor, model, options.seed,
-                                           options.fpfh_max_nn, coarse)
-    levels.keypoints(0)
-    stage(f'{names[n]}: descriptors')
-    levels.levels[0]()   # the first level's, timed as this stage
-    levels.grid, levels.seconds['grid'] = grids[n]
-    return levels
-
-  levels = [levels_of(n, options.keypoints) for n in range(2)]
-  notes += [f'{name}: {f.note}' for name, f in zip(names, levels) if f.note]
-  cloud1, cloud2 = (prepared.PreparedCloud(c) for c in local)
-  reg, f1, f2, _, fallback = _register_levels(
-      levels, lambda: [levels_of(n, 'auto') for n in range(2)], cloud1, cloud2, options, stage)
-  if groundless:
-    if not _settled(reg):
-      return any_rotation()
-    notes.append(UPRIGHT_NOTE)
-  reg.notes = notes + ([fallback] if fallback else [])
-  if any(lv.turned for lv in level):
-    # Back in the clouds' own (centred) frames: T = L1^-1 T' L2, the clouds turned back.
-    reg = leveling.unlevel(reg, level)
-    cloud1, cloud2 = (prepared.PreparedCloud(lv.undo(c)) for lv, c in zip(level, local))
-    f1.xyz, f2.xyz = level[0].undo(f1.xyz), level[1].undo(f2.xyz)
-  reg = _finish(reg, cloud1, cloud2, options, origin=-offset, progress=stage)
-  # T in centred coordinates maps p - o to q - o; in the caller's: q = R p + t + o - R o.
-  to_local = np.eye(4)
-  to_local[:3, 3] = -offset
-  reg.transform = np.linalg.inv(to_local) @ reg.transform @ to_local
-  f1.xyz, f2.xyz = (f.xyz.astype(np.float64) + offset for f in (f1, f2))
+  clouds = {'cloud 1': target, 'cloud 2': source}
+  notes = []
+  registrar = Registrar(clouds.__getitem__, model=model, options=options, say=notes.append,
+                        cache_size=2, progress=progress)
+  reg, f1, f2 = registrar.register('cloud 1', 'cloud 2')
+  reg.notes = notes + reg.notes
   return reg, f1, f2
 
 
@@ -175,26 +120,36 @@ class PairResult:
 
 @dataclasses.dataclass
 class _Cloud:
-  points: prepared.PreparedCloud   # on the grid, float64, levelled (`Options.level`)
+  points: prepared.PreparedCloud   # on the grid, centred (`offset`), levelled (`Options.level`)
   features: cloud_features.FeatureLevels          # keypoints and descriptors of `points`
   seconds: dict                    # read / grid / level, once
   level: leveling.Leveling         # how `points` was levelled
-  own: prepared.PreparedCloud      # on the grid in the file's coordinates (ICP, assessment)
+  own: prepared.PreparedCloud      # on the grid, centred, not levelled (ICP, assessment)
+  offset: np.ndarray               # [3] the file's coordinates less these (`local_origin`)
+
+
+def _shift(offset: np.ndarray) -> np.ndarray:
+  t = np.eye(4)
+  t[:3, 3] = offset
+  return t
 
 
 class Registrar:
-  """Registers pairs of cloud files with one setting (`Options`), keeping the last
-  `cache_size` clouds it met: each read (`read(path)` -> [N, 3] float64 metres, the
-  file's coordinates), put on the grid, levelled (`Options.level`), described (its coarse
-  level first, the rest when a pair needs it) and prepared for the BEV search and the
-  verification once. `say(line)` gets the one-line notes (grid, levelling, keypoint
-  fallbacks). `register_many` streams pairs through one."""
+  """Registers pairs of clouds with one setting (`Options`), keeping the last `cache_size`
+  clouds it met: each read (`read(key)` -> [N, 3] float64 metres, any coordinates: a
+  cloud float32 cannot resolve to MAX_RESOLUTION, e.g. in UTM, is centred on its centroid
+  in float64 first, `local_origin`), put on the grid, levelled (`Options.level`),
+  described (its coarse level first, the rest when a pair needs it) and prepared for the
+  BEV search and the verification once. `say(line)` gets the one-line notes (grid,
+  levelling, keypoint fallbacks); `progress(stage)`, if given, is called as each stage
+  starts. `register` and `register_many` are a Registrar's; the register command's path."""
 
   def __init__(self, read: Callable[[str], np.ndarray], *, model=None,
                options: options_lib.Options | None = None, say: Callable[[str], None] = print,
-               cache_size: int = CACHE_SIZE):
+               cache_size: int = CACHE_SIZE, progress: Callable[[str], None] | None = None):
     self._options = options_lib.Options() if options is None else options
     self._read, self._model, self._say = read, self._options.describing(model), say
+    self._stage = (lambda name: None) if progress is None else progress
     self._voxel = (cloud_features.voxel_size_of(self._model) if self._options.voxel is None
                    else self._options.voxel)
     self._kept: dict[str, _Cloud] = {}
@@ -211,27 +166,34 @@ class Registrar:
     if path in self._kept:
       self._kept[path] = self._kept.pop(path)   # the most recently used last
       return self._kept[path], False
+    name = os.path.basename(path)
+    self._stage(f'{name}: grid')
     t0 = time.perf_counter()
-    points = self._read(path)
+    points = check_cloud(self._read(path), name, np.float64)
     t1 = time.perf_counter()
-    points, note = cloud_features.to_grid(points, self._voxel)
+    offset = cloud_features.local_origin(points)
+    points, note = cloud_features.to_grid(check_cloud(points - offset, name, np.float64),
+                                          self._voxel)
     t2 = time.perf_counter()
     if note:
-      self._say(f'voxel: {os.path.basename(path)}: {note}')
-    name = os.path.basename(path)
-    offset = cloud_features.local_origin(points)
+      self._say(f'voxel: {name}: {note}')
     own = prepared.PreparedCloud(points)
-    (level,), notes = leveling.level_clouds([points], offset, self._options.level, [name])
-    level = dataclasses.replace(level, center=offset)   # found about the centred points
+    (level,), notes = leveling.level_clouds([points], self._options.level, [name],
+                                            sensor_at_origin=not offset.any())
     for line in notes:
       self._say(line)
     points = level.apply(points)
     t3 = time.perf_counter()
     f = self.levels(points, self._options.keypoints)
+    self._stage(f'{name}: keypoints')
+    f.keypoints(0)
     if f.note:
       self._say(f'{name}: {f.note}')
+    self._stage(f'{name}: descriptors')
+    f.levels[0]()   # the first level's, which every pair needs
     self._kept[path] = _Cloud(prepared.PreparedCloud(points) if level.turned else own, f,
-                              {'read': t1 - t0, 'grid': t2 - t1, 'level': t3 - t2}, level, own)
+                              {'read': t1 - t0, 'grid': t2 - t1, 'level': t3 - t2,
+                               **f.seconds}, level, own, offset)
     if len(self._kept) > self._size:
       del self._kept[next(iter(self._kept))]
     return self._kept[path], True
@@ -239,11 +201,11 @@ class Registrar:
   def register(self, path1: str, path2: str
                ) -> tuple[pair_stages.Registration, Features, Features]:
     """T_12 of the pair (maps cloud 2, the source, into cloud 1) -> (registration,
-    features of cloud 1, of cloud 2); the registration's `seconds` holds every stage this
-    pair cost (`STAGES`): reading and gridding a cloud met first, the keypoints and
-    descriptors it made, matching, RANSAC, the BEV search, the verification, ICP and the
-    assessment. A cloud that cannot be registered is a ValueError, a bad file the
-    reader's error."""
+    features of cloud 1, of cloud 2, keypoints in the clouds' coordinates); the
+    registration's `seconds` holds every stage this pair cost (`STAGES`): reading and
+    gridding a cloud met first, the keypoints and descriptors it made, matching, RANSAC,
+    the BEV search, the verification, ICP and the assessment. A cloud that cannot be
+    registered is a ValueError, a bad file the reader's error."""
     seconds = collections.defaultdict(float)
     entries = []
     for path in (path1, path2):
@@ -252,6 +214,18 @@ class Registrar:
         for stage, s in entry.seconds.items():
           seconds[stage] += s
       entries.append(entry)
+    reg, f1, f2 = self._register(entries, seconds, f'{os.path.basename(path1)} / '
+                                 f'{os.path.basename(path2)}')
+    offsets = [e.offset for e in entries]
+    if any(o.any() for o in offsets):   # T maps p - o2 to q - o1: q = o1 + T (p - o2)
+      reg.transform = _shift(offsets[0]) @ reg.transform @ _shift(-offsets[1])
+      f1, f2 = (dataclasses.replace(f, xyz=f.xyz.astype(np.float64) + o)
+                for f, o in zip((f1, f2), offsets))
+    return reg, f1, f2
+
+  def _register(self, entries: list[_Cloud], seconds: dict, pair_name: str
+                ) -> tuple[pair_stages.Registration, Features, Features]:
+    """`register` in the clouds' centred coordinates."""
     groundless = any(e.level.note for e in entries)
 
     def any_rotation(tried: dict):
@@ -262,9 +236,7 @@ class Registrar:
                                                          voxel=0.0))
       spent = collections.Counter(seconds)
       spent.update(tried)
-      spent.update(reg.seconds)
-      for f in (f1, f2):
-        spent.update({k: f.seconds[k] for k in ('keypoints', 'descriptors')})
+      spent.update({k: v for k, v in reg.seconds.items() if k not in ('read', 'grid')})
       reg.seconds = dict(spent)
       reg.notes = [ANY_ROTATION_NOTE] + reg.notes
       return reg, f1, f2
@@ -276,12 +248,12 @@ class Registrar:
     before = {stage: sum(f.seconds[stage] for f in levels) for stage in lazy}
     reg, f1, f2, used, fallback = _register_levels(
         levels, lambda: [self.levels(e.points.points, 'auto') for e in entries],
-        entries[0].points, entries[1].points, self._options)
+        entries[0].points, entries[1].points, self._options, self._stage)
     if fallback:
-      self._say(f'{os.path.basename(path1)} / {os.path.basename(path2)}: {fallback}')
+      self._say(f'{pair_name}: {fallback}')
       levels = levels + list(used)
     for stage in lazy:
-      seconds[stage] = sum(f.seconds[stage] for f in levels) - before[stage]
+      seconds[stage] += sum(f.seconds[stage] for f in levels) - before[stage]
     if groundless:
       if not _settled(reg):
         return any_rotation(reg.seconds)
@@ -290,7 +262,8 @@ class Registrar:
     if any(lv.turned for lv in level):   # back in the files' frames; the kept features stay
       reg = leveling.unlevel(reg, level)
       f1, f2 = (dataclasses.replace(f, xyz=lv.undo(f.xyz)) for f, lv in zip((f1, f2), level))
-    reg = _finish(reg, entries[0].own, entries[1].own, self._options)
+    reg = _finish(reg, entries[0].own, entries[1].own, self._options,
+                  origin=-entries[0].offset, progress=self._stage)
     reg.seconds = {**seconds, **reg.seconds}
     return reg, f1, f2
 
