@@ -7,9 +7,9 @@ set -euo pipefail
 cd "$(dirname "$0")"
 py=.venv/bin/python
 # Simulated LiDAR streets with exact poses (~1-2 minutes; kept when present).
-$py -m experiments.make_synthetic --config=configs/data/synthetic_small.py --out=data_cache/synthetic_small
+$py -m experiments.data.make_synthetic --config=configs/data/synthetic_small.py --out=data_cache/synthetic_small
 # The shipped recipe of `ours` for 400 steps (~2 minutes).
-$py -m experiments.train --config=configs/ours.py --workdir=runs/main_job --config.train.num_steps=400
+$py -m experiments.train --config=configs/training/ours.py --workdir=runs/main_job --config.train.num_steps=400
 # Tables I-III and Figs. 3-6 on 8 pairs of each held-out set: runs/reproduce_small/report.md.
-$py -m experiments.evaluate --config=configs/reproduce_small.py \
+$py -m experiments.evaluate --config=configs/evals/reproduce_small.py \
     --config.data_root=data_cache/synthetic_small --workdir=runs/reproduce_small

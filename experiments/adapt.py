@@ -3,7 +3,7 @@ fine-tune on them, then export the model with a model card.
 
     python -m experiments.adapt --scans=/data/my_drive --out=exports/my_sensor \
         [--pairs=auto|none|MINED.csv] [--keypoints=auto|all|structure] [--init=ours] \
-        [--steps=1500] [--config=configs/adapt.py]
+        [--steps=1500] [--config=configs/training/adapt.py]
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin --descriptor=learned \
         --checkpoint=exports/my_sensor
 
@@ -26,7 +26,7 @@ structure above the ground, and the export keeps the domain that registers more
 matches). OUT/run holds the training run (rerun the command to resume it, mining too); OUT
 holds the exported model (config.json, weights.msgpack) and MODEL_CARD.md (base model,
 scans, pairs, steps, keypoints, wall time, machine, command).
-docs/notes/benchmarks.md times it on 2 CPU cores.
+docs/notes/speed.md times it on 2 CPU cores.
 """
 
 import datetime
@@ -40,10 +40,11 @@ from absl import app
 from absl import flags
 from tqdm import auto as tqdm
 
-from ssd_jax import cli, pretrained, train
+from ssd_jax import pretrained, train
+from ssd_jax.infra import cli
 from ssd_jax.data import clean, io, mined_pairs
-from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.registration import keypoint_choice, mining
+from ssd_jax.infra.logging_utils import quiet_libraries
+from ssd_jax.adaptation import keypoint_choice, mining
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('scans', None, 'Folder (or index .txt) of unlabeled scans of the sensor.')
@@ -57,7 +58,7 @@ flags.DEFINE_enum('keypoints', 'auto', ('auto', 'all', 'structure'),
                   "more of the chained mined pairs past the miner's gaps "
                   "(registration.keypoint_choice); or that domain ('all' points, or the "
                   "'structure' above the ground).")
-cli.define_config_file('config', 'configs/adapt.py', 'Adaptation config.')
+cli.define_config_file('config', 'configs/training/adapt.py', 'Adaptation config.')
 flags.mark_flags_as_required(['scans', 'out'])
 
 CARD = """# {name}: `{init}` adapted to the scans of {scans}
@@ -70,7 +71,7 @@ Fine-tuned without labels from `{init}`, every weight, on {num_scans} unlabeled 
 | base model | `{init}` |
 | scans | `{scans}` ({num_scans} files) |
 | mined pairs | {pairs} |
-| config | `configs/adapt.py` ({steps} steps, learning rate {lr:g}, {schedule}) |
+| config | `configs/training/adapt.py` ({steps} steps, learning rate {lr:g}, {schedule}) |
 | keypoints | {keypoints} |
 | wall time | {minutes:.1f} minutes |
 | machine | {machine} |

@@ -1,7 +1,7 @@
 r"""Run the evaluations a config names (`config.evals`) and write their report.
 
     python -m experiments.evaluate --config=configs/evals/registration.py --workdir=runs/reg
-    python -m experiments.evaluate --config=configs/reproduce.py \
+    python -m experiments.evaluate --config=configs/evals/reproduce.py \
         --config.data_root=DIR --workdir=OUT
 
 configs/evals/registration.py (Tables I / II), precision.py (Fig. 4), repeatability.py,
@@ -19,9 +19,9 @@ import sys
 from absl import app
 from absl import flags
 
-from ssd_jax import cli, distributed, errors
+from ssd_jax.infra import cli, distributed, errors
 from ssd_jax.evaluation import evaluators
-from ssd_jax.logging_utils import quiet_libraries
+from ssd_jax.infra.logging_utils import quiet_libraries
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('workdir', None, 'Output directory.')

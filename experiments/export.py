@@ -11,7 +11,8 @@ machine, command, results) for every model you share.
 from absl import app
 from absl import flags
 
-from ssd_jax import cli, pretrained
+from ssd_jax import pretrained
+from ssd_jax.infra import cli
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('run', None, 'Training workdir.')

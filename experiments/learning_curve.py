@@ -9,7 +9,7 @@ registered on the test sets beside ISS + FPFH; a CSV, a Markdown table and a PNG
 
 Default sets: the synthetic KITTI-style test set as scanned and with each scan turned
 by a random yaw (configs/data/synthetic_kitti_yaw.py), the Oxford-style test set and the
-re-scan pairs of the real scans (experiments.make_real_pairs); --set=NAME=DIR replaces
+re-scan pairs of the real scans (experiments.data.make_real_pairs); --set=NAME=DIR replaces
 them. Rerun
 while training goes on: finished cells are read back from OUT/learning_curve.csv.
 """
@@ -20,10 +20,11 @@ import os
 from absl import app
 from absl import flags
 
-from ssd_jax import checkpoint, cli, inference, viz
+from ssd_jax import inference, viz
+from ssd_jax.infra import checkpoint, cli
 from ssd_jax.data import registration_sets
 from ssd_jax.evaluation import learning_curve, registration, tables
-from ssd_jax.logging_utils import quiet_libraries
+from ssd_jax.infra.logging_utils import quiet_libraries
 from ssd_jax.registration import features
 
 FLAGS = flags.FLAGS
@@ -46,16 +47,16 @@ flags.mark_flags_as_required(['run'])
 
 # The default sets and the commands that make them.
 _MADE_BY = {
-    'data_cache/synthetic_small/test_kitti': 'python -m experiments.make_synthetic '
+    'data_cache/synthetic_small/test_kitti': 'python -m experiments.data.make_synthetic '
                                              '--config=configs/data/synthetic_small.py '
                                              '--out=data_cache/synthetic_small',
-    'data_cache/synthetic_small/test_oxford': 'python -m experiments.make_synthetic '
+    'data_cache/synthetic_small/test_oxford': 'python -m experiments.data.make_synthetic '
                                               '--config=configs/data/synthetic_small.py '
                                               '--out=data_cache/synthetic_small',
-    'data_cache/synthetic_kitti_yaw/test_kitti': 'python -m experiments.make_synthetic '
+    'data_cache/synthetic_kitti_yaw/test_kitti': 'python -m experiments.data.make_synthetic '
                                                  '--config=configs/data/synthetic_kitti_yaw.py '
                                                  '--out=data_cache/synthetic_kitti_yaw',
-    'data_cache/real_pairs': 'python -m experiments.make_real_pairs',
+    'data_cache/real_pairs': 'python -m experiments.data.make_real_pairs',
 }
 
 

@@ -1,7 +1,7 @@
 r"""Mine training pairs from a folder of unlabeled scans in capture order: each scan with
 the scans `--gaps` after it, registered by the classical path (FPFH, RANSAC, the BEV
 search, verification by ICP) and kept only where the pose is confident and closes loops
-(`ssd_jax.registration.mining`). No pose is read.
+(`ssd_jax.adaptation.mining`). No pose is read.
 
     python -m experiments.mine --scans=data_cache/scans_vlp16 --out=runs/mined.csv \
         [--gaps=1,2,4,8] [--poses=data_cache/scans_vlp16_poses.txt] [--workers=N]
@@ -19,10 +19,10 @@ from absl import flags
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import cli, errors
+from ssd_jax.infra import cli, errors
 from ssd_jax.data import clean, io, kitti, mined_pairs
-from ssd_jax.logging_utils import quiet_libraries
-from ssd_jax.registration import mining
+from ssd_jax.infra.logging_utils import quiet_libraries
+from ssd_jax.adaptation import mining
 
 FLAGS = flags.FLAGS
 flags.DEFINE_string('scans', None, 'Folder (or index .txt) of unlabeled scans, in capture '

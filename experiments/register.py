@@ -13,7 +13,6 @@ its error and the rest go on; a rerun registers only the pairs without a row), a
 --sequence poses.txt (KITTI's 12 numbers per scan) and trajectory.png.
 """
 
-import dataclasses
 import json
 import os
 import sys
@@ -24,11 +23,12 @@ from absl import flags
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import cli, errors, pretrained, viz
+from ssd_jax import pretrained, viz
+from ssd_jax.infra import cli, errors
 from ssd_jax.data import clean, groundtruth, io
-from ssd_jax.logging_utils import quiet_libraries
+from ssd_jax.infra.logging_utils import quiet_libraries
 from ssd_jax.registration import features, metrics, outputs, pipeline
-from ssd_jax.registration import cloud_features, pair_stages
+from ssd_jax.registration import pair_stages
 from ssd_jax.registration import options as options_lib
 
 FLAGS = flags.FLAGS
@@ -146,8 +146,9 @@ def main(argv):
     return _batch(options[0], loaded, name)
   for out_path in (FLAGS.json, FLAGS.plot):
     cli.check_writable(out_path)
-  # Each cloud read and gridded, then per descriptor its stages: one step of the bar each.
-  bar = cli.StageBar(2 + sum(5 + (o.verify > 0) + o.icp for o in options), _show_progress(),
+  # Per descriptor: each cloud read and gridded, its keypoints and descriptors, then the
+  # pair's stages: one step of the bar each.
+  bar = cli.StageBar(sum(7 + (o.verify > 0) + o.icp for o in options), _show_progress(),
                      'register')
   try:
     _register_pair(options, loaded, name, bar)
@@ -156,33 +157,21 @@ def main(argv):
 
 
 def _register_pair(options, loaded, name: str, bar: cli.StageBar) -> None:
-  voxel = cloud_features.voxel_size_of(loaded) if FLAGS.voxel is None else FLAGS.voxel
-  clouds, read_seconds = [], {'read': 0.0, 'grid': 0.0}
-  for path in (FLAGS.cloud1, FLAGS.cloud2):
-    bar.stage(f'reading {os.path.basename(path)}')
-    t0 = time.perf_counter()
-    cloud = _read(path)
-    t1 = time.perf_counter()
-    cloud, note = cloud_features.to_grid(cloud, voxel)   # float64 until register() centres it
-    read_seconds['read'] += t1 - t0
-    read_seconds['grid'] += time.perf_counter() - t1
-    if note:
-      bar.say(f'voxel: {os.path.basename(path)}: {note}')
-    clouds.append(cloud)
   t_gt = (outputs.ground_truth(FLAGS.groundtruth, FLAGS.cloud1, FLAGS.cloud2)
           if FLAGS.groundtruth else None)
   results = []
   for o in options:
-    start = time.perf_counter()
-    reg, f1, f2 = pipeline.register(
-        target=clouds[0], source=clouds[1], model=loaded,
-        options=dataclasses.replace(o, voxel=0.0),   # on the grid already
-        progress=lambda s, d=o.descriptor: bar.stage(f'{d}: {s}') if 'grid' not in s else None)
+    start, said = time.perf_counter(), []
+    registrar = pipeline.Registrar(
+        _read, model=loaded, options=o, say=lambda line: said.append(line) or bar.say(line),
+        progress=lambda s, d=o.descriptor: bar.stage(f'{d}: {s}'))
+    reg, f1, f2 = registrar.register(FLAGS.cloud1, FLAGS.cloud2)
     bar.close() if o is options[-1] else bar.clear()   # redrawn below this report
+    clouds = [registrar.points(p) for p in (FLAGS.cloud1, FLAGS.cloud2)]
     out = outputs.pair_json(reg, f1, f2, o, o.describing(loaded), name,
-                            (len(clouds[0]), len(clouds[1])), voxel)
-    out['seconds'].update(read_seconds)
-    out['seconds']['total'] = time.perf_counter() - start + sum(read_seconds.values())
+                            (len(clouds[0]), len(clouds[1])), registrar.voxel)
+    out['notes'] = said + reg.notes
+    out['seconds']['total'] = time.perf_counter() - start
     out['overlap_fitness'] = pair_stages.overlap_fitness(clouds[0], clouds[1], reg.transform)
     if t_gt is not None:
       out['errors'] = metrics.registration_errors(t_gt, reg.transform)

@@ -1,20 +1,20 @@
 r"""Train the self-supervised descriptor.
 
-    python -m experiments.train --config=configs/paper_small.py --workdir=runs/small \
+    python -m experiments.train --config=configs/training/paper_small.py --workdir=runs/small \
         --config.data.path=../shared/data/kitti_object_velodyne
 
 Rerunning the same command resumes from the latest checkpoint in --workdir. The same
 command runs over several processes (README, "Many machines"), e.g. two on one host:
 
-    python -m experiments.train --config=configs/paper_small.py --workdir=runs/two \
+    python -m experiments.train --config=configs/training/paper_small.py --workdir=runs/two \
         --coordinator_address=localhost:12355 --num_processes=2 --process_id=0 &
-    python -m experiments.train --config=configs/paper_small.py --workdir=runs/two \
+    python -m experiments.train --config=configs/training/paper_small.py --workdir=runs/two \
         --coordinator_address=localhost:12355 --num_processes=2 --process_id=1
 """
 
 import os
 
-from ssd_jax import runtime
+from ssd_jax.infra import runtime
 
 runtime.reexec_with_hugepages()
 
@@ -23,8 +23,9 @@ from absl import flags
 from absl import logging
 import jax
 
-from ssd_jax import cli, distributed, train
-from ssd_jax.logging_utils import quiet_libraries
+from ssd_jax import train
+from ssd_jax.infra import cli, distributed
+from ssd_jax.infra.logging_utils import quiet_libraries
 from ssd_jax.data import io
 
 FLAGS = flags.FLAGS
@@ -46,7 +47,7 @@ def main(argv):
   except io.CloudFileError as e:
     hint = ''
     if 'synthetic' in FLAGS.config.data.path and not os.path.exists(FLAGS.config.data.path):
-      hint = ('\nthe synthetic set is made by: python -m experiments.make_synthetic '
+      hint = ('\nthe synthetic set is made by: python -m experiments.data.make_synthetic '
               '--config=configs/data/synthetic_small.py --out=data_cache/synthetic_small')
     raise SystemExit(f'error: {e}{hint}') from None
   except Exception as e:  # pylint: disable=broad-except

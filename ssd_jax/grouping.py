@@ -93,7 +93,7 @@ def ball_query(points: jax.Array, centers: jax.Array, radius: float, max_samples
   Slots beyond the number found repeat the first point found, as PointNet++
   does, so max-pooling over a cluster is unaffected by the padding. Selecting
   "the first c" is done with a running count of in-ball points and a binary
-  search per slot, which is much cheaper on CPU than `top_k` (docs/notes/benchmarks.md).
+  search per slot, which is much cheaper on CPU than `top_k` (docs/notes/speed.md).
   Memory is O(k N) per cloud, so for all-points-as-centers inference on large
   clouds call it on chunks of centers.
 

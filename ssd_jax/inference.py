@@ -14,7 +14,7 @@ bucket. Neighbourhoods are PointNet++ ball queries (the first c
 points within r in index order, padded by repeating the first). Two paths give
 identical results:
   * 'kdtree': a host KD-tree (scipy) finds the neighbours, far faster on CPU for
-    large clouds (docs/notes/benchmarks.md);
+    large clouds (docs/notes/speed.md);
   * 'dense': `grouping.ball_query` in JAX, a dense [chunk, N] distance matrix,
     with the cloud padded to a power-of-two bucket.
 Clouds are put in a seeded random order first, so that "first c in index
@@ -35,7 +35,9 @@ import ml_collections
 import numpy as np
 from scipy import spatial
 
-from ssd_jax import config_upgrade, errors, grouping, network, padding
+from ssd_jax import grouping, network
+from ssd_jax.config_tools import upgrade
+from ssd_jax.infra import errors, padding
 from ssd_jax.data.clean import check_cloud
 
 SEARCHES = ('kdtree', 'dense')
@@ -79,7 +81,7 @@ class Model:
   @classmethod
   def from_config(cls, config: ml_collections.ConfigDict, variables) -> 'Model':
     """The network of `config.model` with `variables`, describing as `config.inference`
-    says (a stored config: after `config_upgrade.upgrade`)."""
+    says (a stored config: after `upgrade.upgrade`)."""
     settings = config.inference
     if settings.keypoints not in KEYPOINT_SELECTIONS:
       raise errors.UserError(f'inference.keypoints must be one of {KEYPOINT_SELECTIONS}, got '
@@ -119,14 +121,14 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
   `checkpoint.CheckpointError` naming its folder."""
   # Only training runs need orbax, 0.2 s of a one-pair command's import time; shipped
   # and exported models (`pretrained`) load without it.
-  from ssd_jax import checkpoint  # pylint: disable=g-import-not-at-top
+  from ssd_jax.infra import checkpoint  # pylint: disable=g-import-not-at-top
   directory = checkpoint_directory(checkpoint_dir)
   ckpt = checkpoint.Checkpointer(directory, asynchronous=False)
   if ckpt.latest_step() is None:
     raise FileNotFoundError(f'{directory}: holds no checkpoint')
   step = ckpt.latest_step() if step is None else step
   try:
-    config = config_upgrade.upgrade(ckpt.restore_config(step))
+    config = upgrade.upgrade(ckpt.restore_config(step))
     state, _ = ckpt.restore(None, step)   # as stored: no optimizer template needed
   finally:
     ckpt.close()
@@ -138,7 +140,7 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
 
 # XLA:CPU hands dots, elementwise ops and reductions to YNNPACK one by one with this
 # setting; its default groups the whole descriptor branch of a 256-cluster chunk into
-# one library fusion that ran 1.4x slower on the 2-core VM (docs/notes/benchmarks.md).
+# one library fusion that ran 1.4x slower on the 2-core VM (docs/notes/speed.md).
 _CPU_COMPILER_OPTIONS = {'xla_cpu_experimental_ynn_fusion_type': ','.join(
     f'LIBRARY_FUSION_TYPE_{kind}' for kind in ('DOT', 'ELTWISE', 'REDUCE'))}
 

@@ -1,6 +1,6 @@
 """Building blocks of the network that are what Flax's own are, but fast on a CPU.
 
-Training on 2 CPU cores is memory-bound in these layers (docs/notes/benchmarks.md), so
+Training on 2 CPU cores is memory-bound in these layers (docs/notes/speed.md), so
 they avoid the passes XLA:CPU would otherwise make; each computes what its plain Flax
 counterpart computes (tested against autodiff and `nn.Dense`), and the parameter names
 are the same, so weights carry over.

@@ -170,7 +170,7 @@ def variables_template(model_config):
 def create(model_config) -> FeatureNet:
   """The `FeatureNet` that a config's `model` section describes (the one place it is
   built, for training and inference alike); a stored run's config goes through
-  `config_upgrade.upgrade` first."""
+  `config_tools.upgrade.upgrade` first."""
   return FeatureNet(descriptor_dim=model_config.descriptor_dim,
                     use_orientation=model_config.use_orientation,
                     bn_momentum=model_config.bn_momentum,

@@ -26,16 +26,18 @@ import jax
 import ml_collections
 import numpy as np
 
-from ssd_jax import config_upgrade, errors, inference, network
+from ssd_jax import inference, network
+from ssd_jax.config_tools import upgrade
+from ssd_jax.infra import errors
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / 'weights'
 SHIPPED = {
-    'ours': 'self-supervised descriptor (configs/ours.py)',
-    'ours_detector': 'self-supervised descriptor and detector (configs/ours_detector.py)',
-    'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/feat3dnet.py)',
-    'ours_rescan': 'ours fine-tuned to match across sensors and standpoints (configs/ours_rescan.py)',
+    'ours': 'self-supervised descriptor (configs/training/ours.py)',
+    'ours_detector': 'self-supervised descriptor and detector (configs/training/ours_detector.py)',
+    'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/training/feat3dnet.py)',
+    'ours_rescan': 'ours fine-tuned to match across sensors and standpoints (configs/training/ours_rescan.py)',
     'ours_mined': 'ours fine-tuned on pairs mined from a mixed-sensor drive '
-                  '(configs/ours_mined.py)',
+                  '(configs/training/ours_mined.py)',
 }
 CONFIG_FILE, WEIGHTS_FILE, CARD_FILE = 'config.json', 'weights.msgpack', 'MODEL_CARD.md'
 
@@ -63,7 +65,7 @@ def load_export(path: str | os.PathLike) -> inference.Model:
   path = Path(path)
   try:
     record = json.loads((path / CONFIG_FILE).read_text())
-    config = config_upgrade.upgrade(record['config'])
+    config = upgrade.upgrade(record['config'])
     template = network.variables_template(config.model)
   except (OSError, ValueError, KeyError, AttributeError) as e:
     raise errors.UserError(f'{path / CONFIG_FILE}: not a readable model config ({e})') from None
@@ -87,10 +89,10 @@ def export_run(run: str | os.PathLike, out: str | os.PathLike, step: int | None 
   'auto' keypoints from the `keypoints` domain (0 / '': the run's own setting), and check
   that it loads back. -> the exported model."""
   # Orbax only here and in training: loading a shipped or exported model never imports it.
-  from ssd_jax import checkpoint  # pylint: disable=g-import-not-at-top
+  from ssd_jax.infra import checkpoint  # pylint: disable=g-import-not-at-top
   model = inference.load(run, step)
   ckpt = checkpoint.Checkpointer(inference.checkpoint_directory(run), asynchronous=False)
-  config = config_upgrade.upgrade(ckpt.restore_config(model.step))
+  config = upgrade.upgrade(ckpt.restore_config(model.step))
   ckpt.close()
   config.inference.num_samples = num_samples or config.inference.num_samples
   config.inference.draws = draws or config.inference.draws

@@ -23,8 +23,10 @@ import numpy as np
 import optax
 from tqdm import auto as tqdm
 
-from ssd_jax import checkpoint, config_checks, distributed, errors, network, objective, pretrained
-from ssd_jax.config_checks import ConfigError
+from ssd_jax import network, objective, pretrained
+from ssd_jax.infra import checkpoint, distributed, errors
+from ssd_jax.config_tools import checks
+from ssd_jax.config_tools.checks import ConfigError
 from ssd_jax.data import datasets, io, mined_pairs
 
 
@@ -253,7 +255,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str,
   same workdir resumes from the latest checkpoint and continues the identical
   run (same batches, same PRNG stream).
   """
-  config_checks.check_config(config)
+  checks.check_config(config)
   if not config.data.path:
     raise ConfigError('data.path is empty: point it at a directory of clouds, an Oxford '
                       'train.txt or a cloud file (--config.data.path=...)')
@@ -291,7 +293,7 @@ def train_and_evaluate(config: ml_collections.ConfigDict, workdir: str,
   if ckpt.latest_step() is not None:
     state, _ = ckpt.restore_latest_intact(
         checkpoint.abstract_like(state),
-        lambda stored: config_checks.check_resumable(config, stored, ckpt.directory))
+        lambda stored: checks.check_resumable(config, stored, ckpt.directory))
     logging.info('Resumed from step %d in %s', int(state.step), ckpt.directory)
   elif t_cfg.get('init_from'):
     state = replicate(initialize_from(jax.device_get(state), t_cfg.init_from, config), mesh)

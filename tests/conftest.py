@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from ssd_jax import cli
-from ssd_jax.configs import paper_small
+from ssd_jax.infra import cli
+from ssd_jax.configs.training import paper_small
 from ssd_jax.configs.data import cross_sensor, synthetic
 from ssd_jax.synthetic import dataset
 

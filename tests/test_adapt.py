@@ -14,7 +14,8 @@ import pytest
 from ssd_jax import geometry, pretrained
 from ssd_jax.data import io, mined_pairs, registration_sets
 from ssd_jax.evaluation import feature_store
-from ssd_jax.registration import bev, keypoint_choice, metrics, pipeline
+from ssd_jax.registration import bev, metrics, pipeline
+from ssd_jax.adaptation import keypoint_choice
 from ssd_jax.registration import cloud_features
 from ssd_jax.registration import options as options_lib
 from ssd_jax.registration import keypoints as keypoints_lib
@@ -118,9 +119,9 @@ def test_structure_keypoints_are_the_farthest_points_above_the_ground(tmp_path):
   levels = cloud_features.feature_levels(cloud.astype(np.float64), 'auto', 'learned', structure)
   np.testing.assert_array_equal(levels.keypoints(1), above)
   assert len(levels.keypoints(0)) == 512 and (height[levels.keypoints(0)] > 0.4).all()
-  idx, coarse = cloud_features.auto_keypoints(cloud, domain='structure')
+  coarse, idx = (level() for level in cloud_features.auto_levels(cloud, 'structure', 512))
   np.testing.assert_array_equal(idx, above)
-  np.testing.assert_array_equal(idx[coarse], levels.keypoints(0))
+  np.testing.assert_array_equal(coarse, levels.keypoints(0))
   np.save(tmp_path / 'street.npy', cloud)
   np.testing.assert_array_equal(
       feature_store.FeatureStore({}).keypoints(tmp_path / 'street.npy', 'structure'), above)

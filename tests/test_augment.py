@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ssd_jax import augment
-from ssd_jax.configs import paper
+from ssd_jax.configs.training import paper
 
 
 def test_uniform_self_rotation_covers_the_circle_and_gaussian_stays_clipped():

@@ -1,6 +1,7 @@
-"""ssd_jax.checkpoint: saving, keeping and restoring train states, and damaged
+"""ssd_jax.infra.checkpoint: saving, keeping and restoring train states, and damaged
 checkpoints named in one line (inference) or moved aside (training resume)."""
 
+import logging
 import os
 import shutil
 import subprocess
@@ -13,7 +14,8 @@ import ml_collections
 import numpy as np
 import pytest
 
-from ssd_jax import checkpoint, inference, train
+from ssd_jax import inference, train
+from ssd_jax.infra import checkpoint
 from tests.conftest import shared_path
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -86,3 +88,22 @@ def test_damaged_newest_checkpoint_falls_back_or_is_named(tiny_config, tmp_path)
   with pytest.raises(checkpoint.CheckpointError, match='no intact checkpoint'):
     train.train_and_evaluate(tiny_config, str(run))
   assert sorted(os.listdir(run / 'checkpoints')) == ['2.damaged', '4.damaged']
+
+
+def test_a_background_save_lost_to_a_dead_peer_logs_no_traceback():
+  """orbax logs a traceback when a save's barrier fails because another process of the run
+  is gone (`distributed` ends the run in one line); any other error of a save still logs."""
+  def record(message, error):
+    return logging.LogRecord('absl', logging.ERROR, 'async_checkpointer.py', 1, message, (),
+                             (type(error), error, None))
+  try:
+    try:
+      raise RuntimeError('UNAVAILABLE: Task 1 heartbeat timeout')
+    except RuntimeError as cause:
+      raise TimeoutError('Timed out while waiting for async_write_complete barrier') from cause
+  except TimeoutError as e:
+    lost = e
+  failed = "[process=0] Failed to run 2 Handler Commit operations in background save thread"
+  assert not checkpoint._drop_peer_failure_records(record(failed, lost))
+  assert checkpoint._drop_peer_failure_records(record(failed, OSError('disk full')))
+  assert checkpoint._drop_peer_failure_records(record('another error', lost))

@@ -1,4 +1,4 @@
-"""ssd_jax.cli: one-line errors for command-line mistakes, and the project's configs and
+"""ssd_jax.infra.cli: one-line errors for command-line mistakes, and the project's configs and
 console scripts from any working directory."""
 
 import os
@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from ssd_jax import cli
+from ssd_jax.infra import cli
 from tests.conftest import shared_path
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -16,23 +16,23 @@ BIN = os.path.dirname(sys.executable)
 
 def test_config_paths_resolve_to_the_project_from_anywhere(tmp_path, monkeypatch):
   monkeypatch.chdir(tmp_path)
-  packaged = os.path.join(ROOT, 'configs', 'paper_small.py')
-  assert os.path.samefile(cli.resolve_config_path('configs/paper_small.py'), packaged)
+  packaged = os.path.join(ROOT, 'configs', 'training', 'paper_small.py')
+  assert os.path.samefile(cli.resolve_config_path('configs/training/paper_small.py'), packaged)
   # A config in a folder of configs/, with an argument.
   resolved, arg = cli.resolve_config_path('configs/experiments/feat3dnet_small.py:pretrain'
                                           ).rsplit(':', 1)
   assert arg == 'pretrain' and os.path.samefile(
       resolved, os.path.join(ROOT, 'configs', 'experiments', 'feat3dnet_small.py'))
   # A file of the user's own wins; names the project lacks stay as given (and fail later).
-  (tmp_path / 'configs').mkdir()
-  (tmp_path / 'configs' / 'paper_small.py').write_text('')
-  assert cli.resolve_config_path('configs/paper_small.py') == 'configs/paper_small.py'
+  (tmp_path / 'configs' / 'training').mkdir(parents=True)
+  (tmp_path / 'configs' / 'training' / 'paper_small.py').write_text('')
+  assert cli.resolve_config_path('configs/training/paper_small.py') == 'configs/training/paper_small.py'
   assert cli.resolve_config_path('configs/no_such.py') == 'configs/no_such.py'
   assert cli.resolve_config_path('my/cfg.py') == 'my/cfg.py'
-  args = ['prog', '--config', 'configs/ours.py', '--config.seed=1', '--workdir=w']
+  args = ['prog', '--config', 'configs/training/ours.py', '--config.seed=1', '--workdir=w']
   monkeypatch.setattr(cli, '_CONFIG_FLAGS', {'config'})
   out = cli._resolve_config_args(args)   # pylint: disable=protected-access
-  assert os.path.samefile(out[2], os.path.join(ROOT, 'configs', 'ours.py'))
+  assert os.path.samefile(out[2], os.path.join(ROOT, 'configs', 'training', 'ours.py'))
   assert out[:2] + out[3:] == args[:2] + args[3:]
 
 
@@ -49,7 +49,7 @@ def test_console_scripts_register_and_train_outside_the_repository(tmp_path):
   assert out.returncode == 0, out.stderr[-3000:]
   assert 'T_12 =' in out.stdout and 'learned descriptors' in out.stdout
   out = subprocess.run(
-      [os.path.join(BIN, 'ssd-jax-train'), '--config=configs/paper_small.py',
+      [os.path.join(BIN, 'ssd-jax-train'), '--config=configs/training/paper_small.py',
        f'--workdir={tmp_path / "run"}', f'--config.data.path={cloud.parent}', '--config.data.eval_path=',
        '--config.data.num_points=512', '--config.model.num_clusters=32',
        '--config.model.num_samples=16', '--config.train.num_steps=2',
@@ -62,7 +62,7 @@ def test_console_scripts_register_and_train_outside_the_repository(tmp_path):
 @pytest.mark.multiprocess
 def test_cli_reports_bad_config_without_traceback(tmp_path):
   out = subprocess.run(
-      [sys.executable, '-m', 'experiments.train', '--config=configs/paper_small.py',
+      [sys.executable, '-m', 'experiments.train', '--config=configs/training/paper_small.py',
        f'--workdir={tmp_path}', '--config.model.descriptor_dim=20',
        f'--config.data.path={tmp_path}'],
       cwd=ROOT, capture_output=True, text=True, timeout=300)
@@ -76,12 +76,12 @@ def test_cli_mistakes_end_in_one_line(tmp_path):
   (tmp_path / 'a_file').write_text('')
   data = f'--config.data.path={tmp_path}'
   cases = [
-      (['--config=configs/paper_small.py', '--config.train.some_key=3'],
+      (['--config=configs/training/paper_small.py', '--config.train.some_key=3'],
        "the config has no field \"'some_key'\""),
-      (['--config=configs/paper_small.py', '--config.train.num_steps=abc'],
+      (['--config=configs/training/paper_small.py', '--config.train.num_steps=abc'],
        "flag --config.train.num_steps=abc: invalid literal for int()"),
       (['--config=configs/no_such.py'], "error: configs/no_such.py [Errno 2] No such file"),
-      (['--config=configs/paper_small.py', f'--workdir={tmp_path / "a_file"}', data],
+      (['--config=configs/training/paper_small.py', f'--workdir={tmp_path / "a_file"}', data],
        'cannot create it as a folder (File exists)'),
   ]
   for args, message in cases:
@@ -95,7 +95,7 @@ def test_cli_mistakes_end_in_one_line(tmp_path):
 
 _FAST_EXIT_SCRIPT = """
 import atexit, ctypes, sys, threading, time
-from ssd_jax import cli
+from ssd_jax.infra import cli
 def late_write():
   time.sleep(0.3)
   open(sys.argv[1] + '.thread', 'w').write('thread done')

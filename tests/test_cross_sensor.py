@@ -147,7 +147,7 @@ def test_a_mixed_drive_takes_its_units_in_turn(tmp_path):
 @pytest.mark.multiprocess
 def test_make_real_pairs_names_a_bad_unit(tmp_path):
   # An empty data root: the flag is named before the scans are looked for.
-  run = subprocess.run([sys.executable, '-m', 'experiments.make_real_pairs', '--sensor=vlp32',
+  run = subprocess.run([sys.executable, '-m', 'experiments.data.make_real_pairs', '--sensor=vlp32',
                         f'--out={tmp_path}', f'--real={tmp_path}'], cwd=ROOT,
                        capture_output=True, text=True, timeout=120)
   assert run.returncode == 1 and run.stderr.strip().splitlines()[-1] == (

@@ -1,4 +1,4 @@
-"""One run over several processes (`ssd_jax.distributed`): 2 local CPU processes against
+"""One run over several processes (`ssd_jax.infra.distributed`): 2 local CPU processes against
 1, through the commands a user runs."""
 
 import json
@@ -12,11 +12,11 @@ import time
 import numpy as np
 import pytest
 
-from ssd_jax import distributed
+from ssd_jax.infra import distributed
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-TINY_TRAIN = ['--config=configs/paper_small.py', '--config.data.num_points=512',
+TINY_TRAIN = ['--config=configs/training/paper_small.py', '--config.data.num_points=512',
               '--config.model.num_clusters=64', '--config.model.num_samples=16',
               '--config.train.batch_size=2', '--config.train.log_every=1',
               '--config.train.eval_every=2', '--config.train.checkpoint_every=2',

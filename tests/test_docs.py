@@ -59,14 +59,14 @@ def test_every_config_and_command_a_page_names_exists():
   the pages, the configs' docstrings and the experiments' own: a renamed file fails here."""
   texts = [page.read_text() for page in PAGES]
   texts += [p.read_text() for p in sorted((ROOT / 'configs').rglob('*.py'))]
-  texts += [p.read_text() for p in sorted((ROOT / 'experiments').glob('*.py'))]
+  texts += [p.read_text() for p in sorted((ROOT / 'experiments').rglob('*.py'))]
   missing = set()
   for text in texts:
     for path in re.findall(r'\bconfigs/[a-z_/0-9]+\.py', text):
       if not (ROOT / path).exists():
         missing.add(path)
-    for module in re.findall(r'python -m experiments\.([a-z_0-9]+)', text):
-      if not (ROOT / 'experiments' / f'{module}.py').exists():
+    for module in re.findall(r'python -m experiments\.([a-z_0-9.]+[a-z_0-9])', text):
+      if not (ROOT / 'experiments' / f'{module.replace(".", "/")}.py').exists():
         missing.add(f'experiments.{module}')
   assert not missing, sorted(missing)
 

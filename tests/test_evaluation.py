@@ -12,8 +12,9 @@ import jax
 import numpy as np
 import pytest
 
-from ssd_jax import errors, geometry, inference, pretrained, train
-from ssd_jax.configs import paper_small
+from ssd_jax import geometry, inference, pretrained, train
+from ssd_jax.infra import errors
+from ssd_jax.configs.training import paper_small
 from ssd_jax.configs.evals import registration as registration_config
 from ssd_jax.data import clean, clusters, io, registration_sets
 from ssd_jax.registration import cloud_features, features, metrics, pipeline
@@ -177,7 +178,7 @@ def _csv(path):
 def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path):
   out = tmp_path / 'out'
   run = subprocess.run(
-      [sys.executable, '-m', 'experiments.evaluate', '--config=configs/reproduce_small.py',
+      [sys.executable, '-m', 'experiments.evaluate', '--config=configs/evals/reproduce_small.py',
        f'--config.data_root={synthetic_root}', f'--workdir={out}', '--config.max_pairs=2',
        '--config.fpfh_max_nn=50', f'--config.checkpoints.ours={tiny_checkpoint}',
        f'--config.checkpoints.feat3dnet={tmp_path / "none"}',
@@ -240,7 +241,7 @@ def test_reproduce_on_a_synthetic_root(synthetic_root, tiny_checkpoint, tmp_path
 @pytest.mark.multiprocess
 def test_reproduce_says_what_it_cannot_do(tmp_path):
   run = subprocess.run([sys.executable, '-m', 'experiments.evaluate',
-                        '--config=configs/reproduce.py', f'--config.data_root={tmp_path}',
+                        '--config=configs/evals/reproduce.py', f'--config.data_root={tmp_path}',
                         f'--workdir={tmp_path / "out"}'], cwd=ROOT, capture_output=True,
                        text=True, timeout=300)
   assert run.returncode != 0 and 'Traceback' not in run.stderr
@@ -268,17 +269,17 @@ def test_evaluate_names_a_bad_type_and_missing_data(tmp_path):
 @pytest.mark.multiprocess
 def test_plot_keypoints_cli(synthetic_root, tmp_path):
   cloud = synthetic_root / 'test_kitti' / '00' / '000000.bin'
-  run = subprocess.run([sys.executable, '-m', 'experiments.plot_keypoints', f'--cloud={cloud}',
+  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints', f'--cloud={cloud}',
                         f'--out={tmp_path / "k.png"}', '--sources=iss,random'], cwd=ROOT,
                        capture_output=True, text=True, timeout=300)
   assert run.returncode == 0, run.stderr[-3000:]
   assert 'random: 1024 keypoints' in run.stdout and (tmp_path / 'k.png').stat().st_size > 10_000
-  run = subprocess.run([sys.executable, '-m', 'experiments.plot_keypoints', f'--cloud={cloud}',
+  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints', f'--cloud={cloud}',
                         f'--out={tmp_path / "k.png"}', '--sources=iss,learned'], cwd=ROOT,
                        capture_output=True, text=True, timeout=300)
   assert run.returncode != 0 and 'learned keypoints need --checkpoint' in run.stderr
   # A shipped name, as every --checkpoint takes one.
-  run = subprocess.run([sys.executable, '-m', 'experiments.plot_keypoints', f'--cloud={cloud}',
+  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints', f'--cloud={cloud}',
                         f'--out={tmp_path / "k.png"}', '--sources=learned',
                         '--checkpoint=ours_detector'], cwd=ROOT, capture_output=True, text=True,
                        timeout=300)

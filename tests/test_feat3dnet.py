@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 from scipy import spatial
 
-from ssd_jax import augment, config_checks, geometry, inference, objective, train
-from ssd_jax.configs import ours as ours_config
-from ssd_jax.configs import feat3dnet as feat3dnet_config
+from ssd_jax import augment, geometry, inference, objective, train
+from ssd_jax.config_tools import checks
+from ssd_jax.configs.training import ours as ours_config
+from ssd_jax.configs.training import feat3dnet as feat3dnet_config
 from ssd_jax.data import clean, datasets, io, kitti
 from ssd_jax.evaluation import orientation, repeatability, triplets
 
@@ -178,7 +179,7 @@ def test_stages_hand_over_descriptor_and_fresh_detector(tiny_config, synthetic_r
   jax.tree.map(np.testing.assert_array_equal, handed.batch_stats['descriptor'],
                jax.device_get(pre_state.batch_stats['descriptor']))
   jax.tree.map(np.testing.assert_array_equal, handed.params['detector'], fresh.params['detector'])
-  with pytest.raises(config_checks.ConfigError, match='train.init_from: .*no such checkpoint'):
+  with pytest.raises(checks.ConfigError, match='train.init_from: .*no such checkpoint'):
     train.initialize_from(fresh, str(tmp_path / 'nowhere'), full)
   # ... and through the training entry: stage 2 starts from stage 1's descriptor.
   full.train.num_steps, full.train.init_from = 2, str(tmp_path / 'pre')
@@ -203,8 +204,8 @@ def test_baseline_config_errors(tiny_config, override, message):
       tiny_config.data[key] = value
     else:
       tiny_config.model[key] = value
-  with pytest.raises(config_checks.ConfigError, match=message):
-    config_checks.check_config(tiny_config)
+  with pytest.raises(checks.ConfigError, match=message):
+    checks.check_config(tiny_config)
 
 
 def _attention_grad(config):
@@ -266,7 +267,7 @@ def test_turn_clouds_turns_each_cloud_about_z_within_range():
 
 @pytest.mark.multiprocess
 def test_triplet_diagnostics_cli_names_a_missing_checkpoint(synthetic_root, tmp_path):
-  run = subprocess.run([sys.executable, '-m', 'experiments.triplet_diagnostics',
+  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.triplets',
                         '--config=configs/experiments/feat3dnet_small.py:pretrain',
                         f'--config.data.path={synthetic_root / "train"}',
                         f'--workdir={tmp_path / "none"}'],
@@ -361,7 +362,7 @@ def test_triplet_loss_reaches_the_orientation_head_in_stage_2(tiny_config, head)
 
 
 def test_architecture_matched_baseline_shares_ours_network_and_budget():
-  """configs/feat3dnet.py trains `ours`' network (configs/ours.py) on the same
+  """configs/training/feat3dnet.py trains `ours`' network (configs/training/ours.py) on the same
   clouds for the same steps; only the objective and its augmentations differ."""
   ours, baseline = ours_config.get_config(), feat3dnet_config.get_config()
   assert baseline.objective == 'triplet' and ours.objective != 'triplet'
@@ -372,5 +373,5 @@ def test_architecture_matched_baseline_shares_ours_network_and_budget():
     assert baseline[section][key] == ours[section][key], (section, key)
   assert baseline.inference.to_dict() == ours.inference.to_dict()
   assert 'rotate_1d' in baseline.model.augmentations
-  config_checks.check_config(baseline)
-  config_checks.check_config(feat3dnet_config.get_config('pretrain'))
+  checks.check_config(baseline)
+  checks.check_config(feat3dnet_config.get_config('pretrain'))

@@ -9,7 +9,7 @@ import pytest
 from scipy import spatial
 
 from ssd_jax import grouping, inference, network, train
-from ssd_jax.configs import paper_small
+from ssd_jax.configs.training import paper_small
 from ssd_jax.data import io
 from tests.conftest import shared_path
 

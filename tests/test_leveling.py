@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from ssd_jax import errors, geometry, pretrained
+from ssd_jax import geometry, pretrained
+from ssd_jax.infra import errors
 from ssd_jax.data import io, registration_sets
 from ssd_jax.evaluation import feature_store
 from ssd_jax.registration import leveling, metrics, pipeline

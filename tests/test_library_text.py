@@ -1,10 +1,10 @@
-"""The patterns that read other libraries' wording (ssd_jax/library_text.py), on lines of
+"""The patterns that read other libraries' wording (ssd_jax/infra/library_text.py), on lines of
 the form those libraries print. The end-to-end tests named in the module's docstring make
 the libraries print the real text; these pin how each pattern reads it."""
 
 import types
 
-from ssd_jax import library_text
+from ssd_jax.infra import library_text
 
 
 def test_jax_fatal_line_gives_its_status_and_kind():

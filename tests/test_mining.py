@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from scipy import spatial
 
-from ssd_jax import errors, geometry, pretrained
+from ssd_jax import geometry, pretrained
+from ssd_jax.infra import errors
 from ssd_jax.data import clean, datasets, groundtruth, kitti, mined_pairs
-from ssd_jax.registration import mining
+from ssd_jax.adaptation import mining
 from ssd_jax.synthetic import cross_sensor
 from tests.conftest import tiny_cross_sensor_config
 

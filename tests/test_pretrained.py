@@ -8,7 +8,8 @@ import ml_collections
 import numpy as np
 import pytest
 
-from ssd_jax import checkpoint, errors, inference, pretrained, train
+from ssd_jax import inference, pretrained, train
+from ssd_jax.infra import checkpoint, errors
 from tests.conftest import tiny_config_dict
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -162,7 +162,7 @@ _FUZZ_DRIVER = '''
 import json, sys
 from absl import flags
 from experiments import register
-from ssd_jax import cli
+from ssd_jax.infra import cli
 results = []
 for args in json.loads(sys.argv[1]):
   flags.FLAGS.unparse_flags()

@@ -7,7 +7,7 @@ import pytest
 
 from ssd_jax import geometry, pretrained
 from ssd_jax.data import io
-from ssd_jax import errors
+from ssd_jax.infra import errors
 from ssd_jax.registration import icp, metrics, pipeline, verification
 from ssd_jax.registration import cloud_features, pair_stages
 from ssd_jax.registration import options as options_lib

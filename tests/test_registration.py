@@ -12,7 +12,7 @@ from ssd_jax.evaluation import registration
 from ssd_jax.registration import features, keypoints, matching, metrics, pipeline, ransac
 from ssd_jax.registration import cloud_features, pair_stages
 from ssd_jax.registration import options as options_lib
-from ssd_jax.registration import reference
+from ssd_jax.evaluation import reference
 from ssd_jax.synthetic import trajectory
 from tests.conftest import shared_path
 
@@ -239,8 +239,9 @@ def test_farthest_point_order_is_the_sampling_of_every_prefix():
   assert len(np.unique(order)) == 300
   for j in (1, 50, 150, 300):
     np.testing.assert_array_equal(np.sort(order[:j]), keypoints.farthest_point_keypoints(pts, j))
-  idx, coarse = cloud_features.auto_keypoints(pts, 300, coarse=100)
-  np.testing.assert_array_equal(idx[coarse], np.sort(order[:100]))
+  coarse, idx = (level() for level in cloud_features.auto_levels(pts, coarse=100, num=300))
+  np.testing.assert_array_equal(coarse, np.sort(order[:100]))
+  np.testing.assert_array_equal(idx, np.sort(order))
 
 
 def test_fpfh_takes_every_neighbour_within_its_radius_unless_capped():

@@ -87,7 +87,7 @@ def test_rescan_set_is_deterministic_and_covers_every_yaw_bin(tmp_path):
 def test_make_real_pairs_command_submaps_and_bad_flags(tmp_path):
   real = shared_path()
   run = lambda *args: subprocess.run(
-      [sys.executable, '-m', 'experiments.make_real_pairs', f'--real={real}', *args],
+      [sys.executable, '-m', 'experiments.data.make_real_pairs', f'--real={real}', *args],
       capture_output=True, text=True, cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
   out = run('--sources=example/oxford_*.bin', '--submaps', '--max_range=30',
             '--pairs_per_cloud=2', f'--out={tmp_path / "sub"}')

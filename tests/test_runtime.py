@@ -1,4 +1,4 @@
-"""ssd_jax.runtime: the huge-page malloc setting and the one-time re-execution."""
+"""ssd_jax.infra.runtime: the huge-page malloc setting and the one-time re-execution."""
 
 import os
 import platform
@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from ssd_jax import runtime
+from ssd_jax.infra import runtime
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -22,7 +22,7 @@ def test_hugepage_env_adds_the_tunable_once_and_keeps_others():
 @pytest.mark.multiprocess
 @pytest.mark.skipif(platform.libc_ver()[0] != 'glibc', reason='glibc only')
 def test_entry_points_reexecute_once_unless_opted_out():
-  script = ('from ssd_jax import runtime\n'
+  script = ('from ssd_jax.infra import runtime\n'
             'print("start", flush=True)\n'
             'runtime.reexec_with_hugepages()\n'
             'import os; print(os.environ.get("GLIBC_TUNABLES", ""))\n')

@@ -263,7 +263,7 @@ def test_reuse_and_config_errors(tiny_set, tmp_path):
 @pytest.mark.multiprocess
 def test_cli_reports_bad_config_without_traceback(tmp_path):
   proc = subprocess.run(
-      [sys.executable, '-m', 'experiments.make_synthetic', f'--out={tmp_path / "x"}',
+      [sys.executable, '-m', 'experiments.data.make_synthetic', f'--out={tmp_path / "x"}',
        '--config=configs/data/synthetic_small.py', '--config.clusters.num_pairs=3'],
       capture_output=True, text=True, cwd=ROOT_DIR)
   assert proc.returncode != 0
@@ -408,7 +408,7 @@ def test_pushbroom_lines_on_a_known_street():
 @pytest.mark.slow
 def test_synthetic_report_covers_both_test_splits(synthetic_root, tmp_path):
   real = shared_path()
-  out = subprocess.run([sys.executable, '-m', 'experiments.synthetic_report',
+  out = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.synthetic_report',
                         f'--data={synthetic_root}', f'--real={real}', '--max_pairs=2',
                         '--fpfh_max_nn=100', f'--out={tmp_path / "r.md"}'],
                        capture_output=True, text=True, cwd=ROOT_DIR)
@@ -421,7 +421,7 @@ def test_synthetic_report_covers_both_test_splits(synthetic_root, tmp_path):
   assert set(stats['baseline_oxford']) == {'iss+fpfh', 'open3d_paper', 'open3d_tutorial'}
   assert all(v['pairs'] == 2 for v in stats['baseline_oxford'].values())
   assert len(stats['pairs_oxford']['open3d_paper']) == 2
-  out = subprocess.run([sys.executable, '-m', 'experiments.synthetic_report',
+  out = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.synthetic_report',
                         f'--data={tmp_path}'], capture_output=True, text=True, cwd=ROOT_DIR)
   assert out.returncode == 1 and 'is not a synthetic dataset' in out.stderr
   assert 'Traceback' not in out.stderr

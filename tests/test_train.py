@@ -10,9 +10,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from ssd_jax.configs import ours as ours_config
-from ssd_jax.configs import paper_small
-from ssd_jax import config_checks, train
+from ssd_jax.configs.training import ours as ours_config
+from ssd_jax.configs.training import paper_small
+from ssd_jax import train
+from ssd_jax.config_tools import checks
 from ssd_jax.data import datasets
 from ssd_jax.synthetic import dataset
 from tests.conftest import shared_path, tiny_synthetic_config
@@ -38,7 +39,7 @@ def _step_fn(config, max_traces=None):
 
 
 def _robust(config):
-  """The options of configs/ours.py on a tiny config (its clouds span 8 m, so the
+  """The options of configs/training/ours.py on a tiny config (its clouds span 8 m, so the
   crop shrinks with them)."""
   robust = ours_config.get_config().model
   for key in ('self_rotation', 'orientation_head', 'branch_dropout', 'independent_centers'):
@@ -238,7 +239,7 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
 def test_data_parallel_on_two_cpu_devices_matches_one(tiny_config):
   script = textwrap.dedent('''
       import jax, numpy as np
-      from ssd_jax.configs import paper_small
+      from ssd_jax.configs.training import paper_small
       from ssd_jax import train
       assert jax.device_count() == 2, jax.devices()
       config = paper_small.get_config()
@@ -285,7 +286,7 @@ def test_resuming_with_a_different_model_is_refused(tiny_config, tmp_path):
   train.train_and_evaluate(tiny_config, str(tmp_path))
   tiny_config.model.descriptor_dim = 64
   tiny_config.train.num_steps = 4
-  with pytest.raises(config_checks.ConfigError, match='model.descriptor_dim=32, but the config says 64'):
+  with pytest.raises(checks.ConfigError, match='model.descriptor_dim=32, but the config says 64'):
     train.train_and_evaluate(tiny_config, str(tmp_path))
 
 

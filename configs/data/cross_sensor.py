@@ -2,7 +2,7 @@
 
 Command (~1-2 minutes on 2 CPU cores):
 
-    python -m experiments.make_cross_sensor --config=configs/data/cross_sensor.py \
+    python -m experiments.data.make_cross_sensor --config=configs/data/cross_sensor.py \
         --out=data_cache/cross_sensor
 
 Writes OUT/synthetic (simulated streets scanned by the reference HDL-64E and by each unit

@@ -5,7 +5,7 @@ measurement, `configs/evals/adaptation_os0.py`).
 
 Command (~1 minute):
 
-    python -m experiments.make_cross_sensor --config=configs/data/os0_pairs.py \
+    python -m experiments.data.make_cross_sensor --config=configs/data/os0_pairs.py \
         --out=data_cache/os0_pairs
 
 96 pairs (4 scenes x 4 distance bins x 6 pairs), both clouds from the wide-field 64-beam

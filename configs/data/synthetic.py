@@ -2,7 +2,7 @@
 
 Command:
 
-    python -m experiments.make_synthetic --config=configs/data/synthetic.py --out=data_cache/synthetic
+    python -m experiments.data.make_synthetic --config=configs/data/synthetic.py --out=data_cache/synthetic
 
 Writes 12 training scenes (~1,100 clouds with a 3DFeat-Net `train.txt`), 4
 KITTI-style test scenes (~170 clouds, ~200 pairs), 4 Oxford-style test scenes

@@ -2,7 +2,7 @@
 
 Command:
 
-    python -m experiments.make_synthetic --config=configs/data/synthetic_kitti_yaw.py \
+    python -m experiments.data.make_synthetic --config=configs/data/synthetic_kitti_yaw.py \
         --out=data_cache/synthetic_kitti_yaw
 
 The same 2 scenes, scans and pairs (~85 clouds, 106 pairs) as

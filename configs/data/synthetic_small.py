@@ -2,7 +2,7 @@
 
 Command:
 
-    python -m experiments.make_synthetic --config=configs/data/synthetic_small.py \
+    python -m experiments.data.make_synthetic --config=configs/data/synthetic_small.py \
         --out=data_cache/synthetic_small
 
 3 training scenes scanned every 6 m (~210 clouds), 2 KITTI-style test scenes

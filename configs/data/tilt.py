@@ -4,7 +4,7 @@
 
 Command (~1 minute on 2 CPU cores):
 
-    python -m experiments.make_cross_sensor --config=configs/data/tilt.py \
+    python -m experiments.data.make_cross_sensor --config=configs/data/tilt.py \
         --out=data_cache/tilt
 
 `configs/evals/tilt.py` evaluates it; the real re-scans tilted the same way are

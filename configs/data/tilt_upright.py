@@ -3,7 +3,7 @@ distances and yaws, every unit level.
 
 Command (~1 minute on 2 CPU cores):
 
-    python -m experiments.make_cross_sensor --config=configs/data/tilt_upright.py \
+    python -m experiments.data.make_cross_sensor --config=configs/data/tilt_upright.py \
         --out=data_cache/tilt_upright
 
 48 pairs: 2 unseen scenes x 3 units (HDL-64E, HDL-32E, VLS-128 against the reference

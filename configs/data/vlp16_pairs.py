@@ -3,7 +3,7 @@ scenes the adaptation scans do not show (`experiments.adapt`'s measurement).
 
 Command (~1 minute):
 
-    python -m experiments.make_cross_sensor --config=configs/data/vlp16_pairs.py \
+    python -m experiments.data.make_cross_sensor --config=configs/data/vlp16_pairs.py \
         --out=data_cache/vlp16_pairs
 
 96 pairs (4 scenes x 4 distance bins x 6 pairs), both clouds from a VLP-16-like unit

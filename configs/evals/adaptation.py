@@ -6,9 +6,9 @@ partner centres), `adapted_single` (`--pairs=none`: the scans alone, the same lo
 
 Commands (~1.5 hours on 2 CPU cores in all):
 
-    python -m experiments.make_cross_sensor --scans_of=vlp16 --out=data_cache/scans_vlp16 \
+    python -m experiments.data.make_cross_sensor --scans_of=vlp16 --out=data_cache/scans_vlp16 \
         --poses=data_cache/scans_vlp16_poses.txt
-    python -m experiments.make_cross_sensor --config=configs/data/vlp16_pairs.py \
+    python -m experiments.data.make_cross_sensor --config=configs/data/vlp16_pairs.py \
         --out=data_cache/vlp16_pairs
     python -m experiments.adapt --scans=data_cache/scans_vlp16 --out=exports/vlp16
     python -m experiments.adapt --scans=data_cache/scans_vlp16 --out=exports/vlp16_s1 \

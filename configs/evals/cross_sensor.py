@@ -3,37 +3,25 @@ matrix per method).
 
 Command (the sets come first, configs/data/cross_sensor.py):
 
-    python -m experiments.make_cross_sensor --out=data_cache/cross_sensor
+    python -m experiments.data.make_cross_sensor --out=data_cache/cross_sensor
     python -m experiments.evaluate --config=configs/evals/cross_sensor.py --workdir=runs/cross_sensor
 
-Rows: `open3d`, Open3D's own ISS + FPFH pipeline with the paper's searches
-(ssd_jax/registration/reference.py); `bev`, the bird's-eye-view search alone
-(ssd_jax/registration/bev.py), its 5 best poses verified; the paper's protocol (ISS
-keypoints, RANSAC over any rotation) with FPFH and each learned descriptor; the same
-descriptors with farthest-point keypoints and upright RANSAC; FPFH, ours, ours_rescan and
-ours_mined with the register command's defaults (the same, RANSAC's 10 best poses and the
-BEV search's 5 verified against the clouds).
-Writes WORKDIR/<set>.md (summary, one success matrix per method) and <set>.csv (success,
-RTE, RRE and inlier ratio per method x unit x distance). docs/notes/cross_sensor.md has the
-protocol and every cell.
+Rows: Open3D's own ISS + FPFH pipeline (`open3d`), the bird's-eye-view search alone,
+verified (`bev`); the paper's protocol (ISS, RANSAC over any rotation) and farthest-point
+keypoints with upright RANSAC for FPFH and each learned descriptor; the register
+command's defaults (`+verify+bev`, its own path) with FPFH, ours, ours_rescan and
+ours_mined. Writes WORKDIR/<set>.md and <set>.csv (success, RTE, RRE, inlier ratio per
+method x unit x distance). `--config.sampling=uniform`: the upright rows with nearest
+neighbours and uniform draws.
 
-Expected (2-core AMD EPYC VM, ~28 minutes with every row, the VM alone:
-docs/notes/benchmarks.md): real re-scans (96 pairs), defaults + ours 99.0 %, defaults +
-FPFH 97.9 %, BEV alone 92.7 %, farthest-point + upright ours 92.7 % / FPFH 81.2 %,
-Open3D's pipeline 38.5 % (its RANSAC is not repeatable: +-1 pair), paper protocol ISS +
-ours 50.0 %, ISS + FPFH 36.5 %; synthetic (120 pairs), defaults + FPFH 94.2 %, defaults +
-ours 94.2 %, BEV alone 93.3 %, farthest-point + upright FPFH 55.8 % / ours 51.7 %, Open3D
-13.3 %. `ours_rescan`: farthest-point + upright 93.8 % (real) / 67.5 % (synthetic), ISS
-62.5 / 29.2 %, defaults 99.0 / 94.2 %. `ours_mined`: farthest-point + upright 94.8 / 70.0 %
-(at least FPFH's in every distance bin), ISS 58.3 / 32.5 %, defaults 99.0 / 94.2 %
-(36 minutes with these rows, other evaluations sharing the VM for 10).
-`--config.sampling=uniform`: the upright rows with cloud 1's nearest neighbours and
-uniform draws (docs/notes/cross_sensor.md).
+Expected (2-core VM, ~28 minutes): the defaults with `ours` register 99.0 % of the 96
+real re-scans and 94.2 % of the 120 synthetic pairs (Open3D's pipeline 38.5 / 13.3 %);
+docs/notes/cross_sensor.md has every row and cell.
 """
 
 import ml_collections
 
-from ssd_jax.configs import evaluation
+from ssd_jax.configs.evals import evaluation
 
 
 def cross_sensor(dataset, distance_bins, title):

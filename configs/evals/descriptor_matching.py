@@ -17,7 +17,7 @@ Expected (2-core CPU VM, ~4 min; the shipped models, all 2,000 pairs): FPFH 45.0
 
 import ml_collections
 
-from ssd_jax.configs import evaluation
+from ssd_jax.configs.evals import evaluation
 
 
 def get_config() -> ml_collections.ConfigDict:

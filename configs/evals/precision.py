@@ -12,7 +12,7 @@ Oxford). On real data: `--config.evals.precision.dataset=/data/oxford/test`.
 
 import ml_collections
 
-from ssd_jax.configs import evaluation
+from ssd_jax.configs.evals import evaluation
 
 
 def get_config() -> ml_collections.ConfigDict:

@@ -6,28 +6,26 @@ Command (the sets first: the five drives beside the project, and a Livox Avia ru
 revisits, the Fast-LIO2_SC-SLAM output folder HKU_MB_2020-09-20-13-34-51_bag, wherever it
 was put):
 
-    python -m experiments.make_real_pairs --drives='real_drives/*' --out=data_cache/real_drives
-    python -m experiments.make_real_pairs --real=PATH/TO/Fast-LIO2_SC-SLAM/output \
+    python -m experiments.data.make_real_pairs --drives='real_drives/*' --out=data_cache/real_drives
+    python -m experiments.data.make_real_pairs --real=PATH/TO/Fast-LIO2_SC-SLAM/output \
         --drives=HKU_MB_2020-09-20-13-34-51_bag --out=data_cache/hku_mb_pairs
     python -m experiments.evaluate --config=configs/evals/real_drives.py --workdir=runs/real_drives
 
 Rows: the register command's defaults with `ours` and with FPFH, and `ours` alone
-(--verify=0 --bev=0), run through the command's own path (`pipeline.register_many`) with
-its verdict; the BEV search alone, verified; Open3D's ISS + FPFH pipeline; KISS-Matcher +
-ICP where `kiss-matcher` is installed (pip install '.[bench]'). A set not made is skipped
-and the report says so. docs/notes/real_drives.md has the tables and what each stage loses.
-
-Expected (2-core AMD EPYC VM): the defaults with `ours` register 91.6 % of the five drives'
-214 pairs (every pair 2-20 m apart, 81.0 % at 20-30 m; KISS-Matcher + ICP 57.0 %) and
-48.8 % of the Livox drive's 80 (37.5 % at 10-20 m; KISS-Matcher 26.2 %); their verdict
-trusts 98.0 / 97.4 % of the right poses and refuses 94.4 / 100 % of the wrong ones;
-0.71 / 1.36 s a pair. Open3D's row takes ~13 s a pair on the five drives' scans: drop it
+(--verify=0 --bev=0), run through the command's own path (`pipeline.Registrar`) with its
+verdict; the BEV search alone, verified; Open3D's ISS + FPFH pipeline; KISS-Matcher + ICP
+where `kiss-matcher` is installed (pip install '.[bench]'). A set not made is skipped and
+the report says so. Open3D's row takes ~13 s a pair on the five drives' scans: drop it
 (`--config.evals.drives.rows=...`) for a quick run.
+
+Expected (2-core VM): the defaults with `ours` register 91.6 % of the five drives' 214
+pairs and 48.8 % of the Livox drive's 80; docs/notes/real_drives.md has the tables and
+what each stage loses.
 """
 
 import ml_collections
 
-from ssd_jax.configs import evaluation
+from ssd_jax.configs.evals import evaluation
 
 ROWS = ('register', 'register_fpfh', 'register_descriptor', 'bev', 'open3d', 'kiss_matcher')
 DISTANCE_BINS = ((0.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 30.0))

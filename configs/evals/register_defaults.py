@@ -1,24 +1,21 @@
 """The register command's defaults (farthest-point keypoints, 512 then 1,024 where those
 leave the pose in doubt, upright RANSAC, its 10 best poses and the bird's-eye-view
-search's 5 verified against the clouds) with FPFH and the
-shipped `ours`, `ours_rescan` and `ours_mined`, on the README's 64-beam sets: the README's
-"defaults" rows.
+search's 5 verified against the clouds) with FPFH and the shipped `ours`, `ours_rescan`
+and `ours_mined`, on the README's 64-beam sets, each row through the command's own path
+(`pipeline.Registrar` on the files): the README's "defaults" rows.
 
-Command (after the main job's synthetic set and `experiments.make_real_pairs`; 12 min on
-the 2-core AMD EPYC VM with two other evaluations sharing it, FPFH most of it):
+Command (after the main job's synthetic set and `experiments.data.make_real_pairs`; 10 min
+on the 2-core AMD EPYC VM with the test suite sharing it, FPFH most of it):
 
     python -m experiments.evaluate --config=configs/evals/register_defaults.py \
         --workdir=runs/register_defaults
 
 Expected (2-core CPU VM): 100 % on all three sets (KITTI-style 106, push-broom 53, real
-re-scans 80) for ours, ours_rescan, ours_mined and FPFH, RTE 0.008 / 0.036 / 0.006 m,
-every pair ended at the coarse level, no pose refused as degenerate. RANSAC's best pose
-alone, without the verification (`--config.rows="('auto+ours+upright','auto+fpfh+upright')"`):
-ours 100 / 100 / 100 %, FPFH 99.1 / 100 / 100 %, RTE 0.07-0.17 m. docs/notes/cross_sensor.md has
-the sets where the defaults matter.
+re-scans 80) with every row, RTE 0.009 / 0.037 / 0.006 m, every pair ended at the coarse
+level and trusted; docs/notes/results.md has the table and RANSAC's best pose alone.
 """
 
-from ssd_jax.configs import evaluation
+from ssd_jax.configs.evals import evaluation
 
 
 def get_config():

@@ -17,7 +17,7 @@ inliers) and report.md.
 
 import ml_collections
 
-from ssd_jax.configs import evaluation
+from ssd_jax.configs.evals import evaluation
 
 
 def get_config() -> ml_collections.ConfigDict:

@@ -10,7 +10,7 @@ Command (the small synthetic KITTI-style set):
 
 import ml_collections
 
-from ssd_jax.configs import evaluation
+from ssd_jax.configs.evals import evaluation
 
 
 def get_config() -> ml_collections.ConfigDict:

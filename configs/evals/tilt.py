@@ -4,11 +4,11 @@ each scan levelled by its ground first (`level='ground'`, as `register --level=g
 
 Commands (data ~3 minutes, the evaluation ~15 minutes on 2 CPU cores):
 
-    python -m experiments.make_cross_sensor --config=configs/data/tilt_upright.py \
+    python -m experiments.data.make_cross_sensor --config=configs/data/tilt_upright.py \
         --out=data_cache/tilt_upright
-    python -m experiments.make_cross_sensor --config=configs/data/tilt.py --out=data_cache/tilt
-    python -m experiments.make_real_pairs --real=../shared/data --out=data_cache/real_pairs
-    python -m experiments.make_real_pairs --real=../shared/data --tilt=10,30 \
+    python -m experiments.data.make_cross_sensor --config=configs/data/tilt.py --out=data_cache/tilt
+    python -m experiments.data.make_real_pairs --real=../shared/data --out=data_cache/real_pairs
+    python -m experiments.data.make_real_pairs --real=../shared/data --tilt=10,30 \
         --out=data_cache/real_pairs_tilted
     python -m experiments.evaluate --config=configs/evals/tilt.py --workdir=runs/tilt
 
@@ -17,7 +17,7 @@ alone), and the register command's defaults (`auto+ours+upright+verify+bev`).
 `--config.level=none` evaluates the scans as given. docs/registration.md has the results.
 """
 
-from ssd_jax.configs import evaluation
+from ssd_jax.configs.evals import evaluation
 
 
 def get_config():

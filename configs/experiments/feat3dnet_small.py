@@ -7,7 +7,7 @@ Commands (after the README's main job made data_cache/synthetic_small):
     python -m experiments.train --config=configs/experiments/feat3dnet_small.py \
         --workdir=runs/feat3dnet_small
 
-The reference recipe (configs/paper_feat3dnet.py) shrunk as configs/paper_small.py
+The reference recipe (configs/training/paper_feat3dnet.py) shrunk as configs/training/paper_small.py
 shrinks the paper's: 2 triplets x 2,048 points, 256 clusters of 32 points, and a
 learning rate of 1e-3 instead of 1e-5 so that a few hundred steps learn something.
 Stage 1: 600 steps (~2 min); stage 2: 3,000 steps (~15 min).
@@ -29,8 +29,8 @@ this recipe on training streets with turned street furniture and 4 m clusters, w
 stage 2 does lower its loss; the evaluations' default baseline checkpoint is that run.
 """
 
-from ssd_jax.configs import paper_small
-from ssd_jax.configs import paper_feat3dnet as paper_baseline
+from ssd_jax.configs.training import paper_small
+from ssd_jax.configs.training import paper_feat3dnet as paper_baseline
 
 
 def get_config(stage: str = 'full'):

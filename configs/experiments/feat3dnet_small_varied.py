@@ -1,6 +1,6 @@
 """The 3DFeat-Net baseline's CPU run on turn-distinctive training streets, 4 m clusters.
 
-Commands (after `experiments.make_synthetic --config=configs/experiments/synthetic_small_varied.py
+Commands (after `experiments.data.make_synthetic --config=configs/experiments/synthetic_small_varied.py
 --out=data_cache/synthetic_small_varied`):
 
     python -m experiments.train --config=configs/experiments/feat3dnet_small_varied.py:pretrain \

@@ -5,13 +5,13 @@ Command (the synthetic set comes first):
 
     python -m experiments.train --config=configs/experiments/finetune.py --workdir=runs/finetune
 
-`configs/ours.py` (the recipe of `ours`) started from `ours`' weights (every weight:
+`configs/training/ours.py` (the recipe of `ours`) started from `ours`' weights (every weight:
 `train.init_scope='model'`) at a third of its learning rate, decayed to 0 by a cosine over
 3,000 steps. Expected (validation pairs, farthest-point keypoints, upright RANSAC, no
 verification): real cross-sensor 94.8 %, synthetic 45.0 % (`ours`: 91.7, 43.3).
 """
 
-from ssd_jax.configs import ours as ours_config
+from ssd_jax.configs.training import ours as ours_config
 
 
 def get_config():

@@ -13,7 +13,7 @@ training attention this way failed; docs/notes/feat3dnet_baseline.md measures wh
 does here.
 """
 
-from ssd_jax.configs import paper_small
+from ssd_jax.configs.training import paper_small
 
 
 def get_config():

@@ -1,4 +1,4 @@
-"""`configs/ours_rescan.py` with re-scans whose unit casts its own rays at the cloud's
+"""`configs/training/ours_rescan.py` with re-scans whose unit casts its own rays at the cloud's
 surfaces (`data.rescan_beams='cast'`, `sensors.cast`) instead of keeping the cloud's points
 that lie on its beams: the second view's ground carries the new unit's rings about its own
 standpoint, not the training cloud's rings, so matching ring patterns no longer pays.
@@ -14,7 +14,7 @@ validation 60.0 %, test 59.2 % (`--config.seed=1`: 70.0 / 65.8 %; `ours_rescan` 
 and 67.5 / 60.8 %): no gain. docs/notes/cross_sensor.md has the table.
 """
 
-from ssd_jax.configs import ours_rescan
+from ssd_jax.configs.training import ours_rescan
 
 
 def get_config():

@@ -1,4 +1,4 @@
-"""`configs/ours_rescan.py` with jittered partners: does training on partners up to 1 m
+"""`configs/training/ours_rescan.py` with jittered partners: does training on partners up to 1 m
 off (as far as registration's keypoints of two clouds lie from each other) help the
 descriptor alone across sensors?
 
@@ -16,7 +16,7 @@ validation 63.3 / 54.2 % (seeds 0 / 1; `ours_rescan` 65.0), test 60.0 / 56.7 % (
 65.0 / 55.0): no gain, inside the seed spread. docs/notes/cross_sensor.md has the table.
 """
 
-from ssd_jax.configs import ours_rescan
+from ssd_jax.configs.training import ours_rescan
 
 
 def get_config():

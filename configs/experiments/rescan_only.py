@@ -1,4 +1,4 @@
-"""`configs/ours_rescan.py` with every second branch a re-scan (`data.rescan_rate` 1, not
+"""`configs/training/ours_rescan.py` with every second branch a re-scan (`data.rescan_rate` 1, not
 0.5): does more cross-view training help across sensors?
 
 Command (the synthetic set comes first):
@@ -13,7 +13,7 @@ second run sharing the 2-core VM): synthetic cross-sensor validation 56.7 % (`ou
 pairs. docs/notes/cross_sensor.md has the table.
 """
 
-from ssd_jax.configs import ours_rescan
+from ssd_jax.configs.training import ours_rescan
 
 
 def get_config():

@@ -1,4 +1,4 @@
-"""`configs/ours_rescan.py` trained on wider crops: 40 m disks around each sensor instead of
+"""`configs/training/ours_rescan.py` trained on wider crops: 40 m disks around each sensor instead of
 20 m (`data.crop_radius`), each branch cropped to 32 m instead of 16 m
 (`model.branch_crop_radius`). Registration's farthest-point keypoints spread over a
 whole 80 m scan, most of them in its sparse far range, which 20 m training crops never
@@ -15,7 +15,7 @@ with two runs sharing the 2-core VM): synthetic cross-sensor validation 60.8 / 6
 mean is within a pair or two of `ours_rescan`'s. docs/notes/cross_sensor.md has the table.
 """
 
-from ssd_jax.configs import ours_rescan
+from ssd_jax.configs.training import ours_rescan
 
 
 def get_config():

@@ -2,7 +2,7 @@
 
 Command (~40 s on 2 CPU cores):
 
-    python -m experiments.make_synthetic --config=configs/experiments/synthetic_small_varied.py \
+    python -m experiments.data.make_synthetic --config=configs/experiments/synthetic_small_varied.py \
         --out=data_cache/synthetic_small_varied
 
 `synthetic_small`'s 3 training streets (same seeds, same layout draws, ~210 clouds

@@ -9,7 +9,7 @@ from absl import logging
 import numpy as np
 from scipy import spatial
 
-from ssd_jax import errors
+from ssd_jax.infra import errors
 from ssd_jax.data import io
 
 

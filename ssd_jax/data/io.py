@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ssd_jax import errors
+from ssd_jax.infra import errors
 
 
 # .bin row layouts: name -> (little-endian dtype, columns). The first three columns are

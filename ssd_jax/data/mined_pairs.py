@@ -16,7 +16,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ssd_jax import errors
+from ssd_jax.infra import errors
 
 HEADER = ['cloud1', 'cloud2', 'gap', 'fitness', 'confident', 'kept', 'reason',
           *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)]]

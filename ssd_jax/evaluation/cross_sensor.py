@@ -20,9 +20,10 @@ import jax
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import distributed, errors
+from ssd_jax.infra import distributed, errors
 from ssd_jax.evaluation import feature_store, registration, tables
-from ssd_jax.registration import metrics, reference, verification
+from ssd_jax.registration import metrics, verification
+from ssd_jax.evaluation import reference
 
 # Rows that register whole clouds, without the project's keypoints and descriptors:
 # Open3D's own pipeline (the outside reference), and the bird's-eye-view search alone,

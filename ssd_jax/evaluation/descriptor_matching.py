@@ -16,7 +16,8 @@ from typing import Mapping, Sequence
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import distributed, inference
+from ssd_jax import inference
+from ssd_jax.infra import distributed
 from ssd_jax.data import clean, clusters as clusters_lib, io
 from ssd_jax.registration import features as features_lib, keypoints
 

@@ -11,7 +11,7 @@ section `{type: <evaluator>, <its settings>}`:
     cross_sensor         registration as a sensor x distance matrix, with Open3D's pipeline
 
 Settings shared by all (checkpoints, keypoint x descriptor rows, RANSAC, seeds) sit at
-the top of the config (configs/evaluation.py). Data paths are tried in order, relative
+the top of the config (configs/evals/evaluation.py). Data paths are tried in order, relative
 to `config.data_root`; an evaluation whose data is not there is skipped and the report
 says why. `evaluate` runs them, in the order of `TYPES`, then by name, writes each one's
 tables and figures into the workdir under its name, and OUT/report.md holding them all
@@ -34,11 +34,12 @@ from typing import Callable, Sequence
 import jax
 import ml_collections
 
-from ssd_jax import distributed, errors, viz
+from ssd_jax import viz
+from ssd_jax.infra import distributed, errors
 from ssd_jax.data import clusters, io, registration_sets
 from ssd_jax.evaluation import (cross_sensor, descriptor_matching, feature_store, fingerprint,
                                 precision, registration, repeatability, report)
-from ssd_jax.registration import reference
+from ssd_jax.evaluation import reference
 from ssd_jax.registration import pair_stages
 
 REPRODUCIBILITY = (

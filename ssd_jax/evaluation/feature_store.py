@@ -19,7 +19,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ssd_jax import errors, inference, pretrained
+from ssd_jax import inference, pretrained
+from ssd_jax.infra import errors
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import fingerprint
 from ssd_jax.registration import cloud_features, features as features_lib, leveling, pipeline
@@ -249,7 +250,10 @@ class FeatureStore:
     return self.leveling(path1).matrix @ transform @ np.linalg.inv(self.leveling(path2).matrix)
 
   def in_levelled_frames(self, pairs: Sequence) -> list:
-    """`registration_sets.RegistrationPair`s with T_12 `in_levelled_frame`."""
+    """`registration_sets.RegistrationPair`s with T_12 `in_levelled_frame` (the same pairs
+    where the store does not level)."""
+    if self.level == 'none':
+      return list(pairs)
     return [dataclasses.replace(p, transform=self.in_levelled_frame(p.cloud1, p.cloud2,
                                                                     p.transform))
             for p in pairs]
@@ -290,7 +294,7 @@ class FeatureStore:
       t0 = time.perf_counter()
       if source in ('auto', 'structure'):
         domain = 'all' if source == 'auto' else source
-        idx, _ = cloud_features.auto_keypoints(points, self.num_keypoints, domain=domain)
+        idx = cloud_features.auto_levels(points, domain, num=self.num_keypoints)[-1]()
       elif source in BUILTIN_KEYPOINTS:
         # The protocol: a detector that finds too few keypoints fails the pair.
         idx, _ = cloud_features.compute_keypoints(points, source, seed=self.seed, fallback=False)

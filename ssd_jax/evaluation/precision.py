@@ -15,7 +15,8 @@ import numpy as np
 from scipy import spatial
 from tqdm import auto as tqdm
 
-from ssd_jax import distributed, geometry
+from ssd_jax import geometry
+from ssd_jax.infra import distributed
 from ssd_jax.evaluation import feature_store
 from ssd_jax.registration import matching
 

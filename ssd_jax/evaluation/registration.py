@@ -12,7 +12,8 @@ import jax
 import numpy as np
 from tqdm import auto as tqdm
 
-from ssd_jax import distributed, errors, geometry
+from ssd_jax import geometry
+from ssd_jax.infra import distributed, errors
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import feature_store, paper, tables
 from ssd_jax.registration import metrics, pair_stages, pipeline
@@ -90,10 +91,10 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
         res.update(failed(str(e)))
       else:
         res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
-                   levels=reg.levels_tried, seconds=time.perf_counter() - t0,
+                   levels=reg.levels_tried,
                    **metrics.registration_errors(pair.transform, reg.transform))
-        if reg.verdict is not None:
-          res.update(reg.verdict.to_json())
+        if row in registrars:   # the command's verdict, and what the pair cost it
+          res.update(seconds=time.perf_counter() - t0, **reg.verdict.to_json())
       out.append(res)
       if log is not None and one_process:   # as it goes: a stopped run keeps its pairs
         log.write(json.dumps(res) + '\n')

@@ -12,7 +12,8 @@ import numpy as np
 from scipy import spatial
 from tqdm import auto as tqdm
 
-from ssd_jax import distributed, geometry
+from ssd_jax import geometry
+from ssd_jax.infra import distributed
 from ssd_jax.evaluation import feature_store
 
 RADIUS = 0.5   # metres

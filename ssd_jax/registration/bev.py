@@ -174,7 +174,7 @@ def _rotations(yaws: np.ndarray) -> np.ndarray:
 # the work of every yaw at `resolution`). Its COARSE_PEAKS * k best distinct peaks are then
 # scored at `resolution` and at the `yaw_step` yaws within (COARSE - 1) steps of theirs, in
 # a window of +-REFINE cells around each: the fine search near every peak the coarse one
-# found (docs/notes/benchmarks.md: what the search costs, and that it keeps every pose).
+# found (docs/notes/speed.md: what the search costs, and that it keeps every pose).
 COARSE = 2
 COARSE_PEAKS = 12
 REFINE = 2

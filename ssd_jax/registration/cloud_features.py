@@ -150,9 +150,7 @@ def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0
   """
   points = check_cloud(points)
   if method == 'auto':
-    keypoints_lib.check_registrable(points, 'auto keypoints')
-    among = keypoint_domain(points, domain_of(model))
-    return among[keypoints_lib.farthest_point_keypoints(points[among], num_random)], ''
+    return auto_levels(points, domain_of(model), num=num_random)[-1](), ''
   if method == 'iss':
     if fallback:
       return keypoints_lib.iss_with_fallbacks(points)
@@ -237,18 +235,17 @@ def keypoint_domain(points: np.ndarray, domain: str = 'all') -> np.ndarray:
   return rising if len(rising) >= keypoints_lib.ENOUGH_KEYPOINTS else np.arange(len(points))
 
 
-def auto_keypoints(points: np.ndarray, num: int = keypoints_lib.FARTHEST_POINT_KEYPOINTS,
-                   coarse: int = COARSE_KEYPOINTS, domain: str = 'all'
-                   ) -> tuple[np.ndarray, np.ndarray]:
-  """`compute_keypoints(points, 'auto')` (of the `keypoint_domain`) and its coarse level:
-  (sorted indices [K] into points [N, 3], positions in them of the first `coarse`
-  farthest-point picks)."""
-  points = check_cloud(points)
+def auto_levels(points: np.ndarray, domain: str = 'all', coarse: int = 0,
+                num: int = keypoints_lib.FARTHEST_POINT_KEYPOINTS) -> list[Callable]:
+  """'auto' keypoints of points [N, 3] (metres, z up), sampled from the `keypoint_domain`:
+  one callable per level -> sorted indices into points, the first `coarse` farthest-point
+  picks (where coarse > 0), then all `num`; one sampling, continued only as far as a level
+  is asked for (the first j picks are the j-point sampling)."""
   keypoints_lib.check_registrable(points, 'auto keypoints')
   among = keypoint_domain(points, domain)
-  order = among[keypoints_lib.farthest_point_order(points[among], num)]
-  idx = np.unique(order)
-  return idx, np.searchsorted(idx, np.unique(order[:coarse]))
+  sampler = keypoints_lib.FarthestPointSampler(points[among])
+  return [lambda k=k: among[np.unique(sampler.order(k))]
+          for k in ([coarse] if coarse > 0 else []) + [num]]
 
 
 def coarse_keypoints(verified: bool) -> int:
@@ -260,22 +257,17 @@ def coarse_keypoints(verified: bool) -> int:
 def feature_levels(points: np.ndarray, keypoints: str = 'auto', descriptor: str = 'learned',
                    model=None, seed: int = 0, fpfh_max_nn: int = features.FPFH_MAX_NN,
                    coarse: int = COARSE_KEYPOINTS) -> FeatureLevels:
-  """The `FeatureLevels` of one cloud [N, 3] (on its grid already, any coordinates: as
-  `features_anywhere`): with 'auto' keypoints and `coarse` > 0 two levels, the first
-  `coarse` farthest-point picks (of `keypoint_domain`), then all
-  `keypoints.FARTHEST_POINT_KEYPOINTS` (the sampling continued only where a pair needs
-  them), else one. Nothing is described yet."""
+  """The `FeatureLevels` of one cloud [N, 3] (on its grid already, any coordinates: the
+  features are made around `local_origin`, the keypoints returned in the input's): with
+  'auto' keypoints and `coarse` > 0 two levels (`auto_levels`), else one. Nothing is
+  described yet."""
   points = check_cloud(points, dtype=np.float64)
   offset = local_origin(points)
   local = check_cloud(points - offset)
   t0 = time.perf_counter()
   note = ''
-  if keypoints == 'auto' and coarse > 0:
-    keypoints_lib.check_registrable(local, 'auto keypoints')
-    among = keypoint_domain(local, domain_of(model))
-    sampler = keypoints_lib.FarthestPointSampler(local[among])
-    levels = [lambda: among[np.unique(sampler.order(coarse))],
-              lambda: among[np.unique(sampler.order(keypoints_lib.FARTHEST_POINT_KEYPOINTS))]]
+  if keypoints == 'auto':
+    levels = auto_levels(local, domain_of(model), coarse)
   else:
     idx, note = compute_keypoints(local, keypoints, model, seed)
     if len(idx) < 3:
@@ -296,18 +288,3 @@ def local_origin(*clouds: np.ndarray) -> np.ndarray:
   if np.spacing(np.float32(reach)) <= clean.MAX_RESOLUTION:
     return np.zeros(3)
   return clouds[0].mean(axis=0)
-
-
-def features_anywhere(points: np.ndarray, keypoints: str = 'iss', descriptor: str = 'fpfh',
-                      model=None, seed: int = 0, fpfh_max_nn: int = features.FPFH_MAX_NN,
-                      voxel: float | None = None, progress=None) -> CloudFeatures:
-  """`cloud_features` of one cloud [N, 3] in any coordinates (float64 metres, e.g. UTM):
-  computed around `local_origin(points)`, keypoints returned in the input coordinates
-  as float64. Features of each cloud once, for registering many pairs (`estimate`
-  then works in the input coordinates, in float64)."""
-  points = check_cloud(points, dtype=np.float64)
-  offset = local_origin(points)
-  f = cloud_features(check_cloud(points - offset), keypoints, descriptor, model, seed,
-                     fpfh_max_nn, voxel, progress)
-  f.xyz = f.xyz.astype(np.float64) + offset
-  return f

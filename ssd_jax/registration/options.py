@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from ssd_jax import errors
+from ssd_jax.infra import errors
 from ssd_jax.registration import features
 
 KEYPOINTS = ('auto', 'iss', 'learned', 'random')
@@ -36,7 +36,7 @@ LEVELS = ('none', 'ground')
 # (the shipped models' 4 draws of 64 points, for the paper's protocol); with the BEV search
 # and the verification picking the pose, one draw of 32 registered every pair that four of
 # 64 did on every set of the README's table, at an eighth of the network's work
-# (docs/notes/benchmarks.md).
+# (docs/notes/speed.md).
 VERIFIED_DRAWS = 1
 VERIFIED_SAMPLES = 32
 

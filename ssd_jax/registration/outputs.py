@@ -12,7 +12,8 @@ import os
 
 import numpy as np
 
-from ssd_jax import errors, geometry
+from ssd_jax import geometry
+from ssd_jax.infra import errors
 from ssd_jax.data import groundtruth, io
 from ssd_jax.registration import metrics, pipeline, uncertainty
 from ssd_jax.registration import cloud_features, pair_stages

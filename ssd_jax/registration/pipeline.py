@@ -150,8 +150,8 @@ class Registrar:
     self._options = options_lib.Options() if options is None else options
     self._read, self._model, self._say = read, self._options.describing(model), say
     self._stage = (lambda name: None) if progress is None else progress
-    self._voxel = (cloud_features.voxel_size_of(self._model) if self._options.voxel is None
-                   else self._options.voxel)
+    self.voxel = (cloud_features.voxel_size_of(self._model) if self._options.voxel is None
+                  else self._options.voxel)   # metres: the grid every cloud is put on
     self._kept: dict[str, _Cloud] = {}
     self._size = cache_size
 
@@ -173,7 +173,7 @@ class Registrar:
     t1 = time.perf_counter()
     offset = cloud_features.local_origin(points)
     points, note = cloud_features.to_grid(check_cloud(points - offset, name, np.float64),
-                                          self._voxel)
+                                          self.voxel)
     t2 = time.perf_counter()
     if note:
       self._say(f'voxel: {name}: {note}')
@@ -197,6 +197,11 @@ class Registrar:
     if len(self._kept) > self._size:
       del self._kept[next(iter(self._kept))]
     return self._kept[path], True
+
+  def points(self, path: str) -> np.ndarray:
+    """The cloud at `path` [N, 3] on the grid, float64 metres in its own coordinates."""
+    entry, _ = self.cloud(path)
+    return entry.own.points + entry.offset
 
   def register(self, path1: str, path2: str
                ) -> tuple[pair_stages.Registration, Features, Features]:

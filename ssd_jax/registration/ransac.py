@@ -28,7 +28,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ssd_jax import cf, padding
+from ssd_jax import cf
+from ssd_jax.infra import padding
 
 
 @dataclasses.dataclass(frozen=True)

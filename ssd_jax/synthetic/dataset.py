@@ -31,7 +31,9 @@ from typing import Callable
 import numpy as np
 from scipy import spatial
 
-from ssd_jax import config_upgrade, errors, geometry
+from ssd_jax import geometry
+from ssd_jax.config_tools import upgrade
+from ssd_jax.infra import errors
 from ssd_jax.data import datasets, groundtruth, io, kitti, preprocess
 from ssd_jax.registration import keypoints
 from ssd_jax.synthetic import lidar, pushbroom, scene as scene_lib, trajectory
@@ -405,7 +407,7 @@ def generate(config, out: str | os.PathLike, progress: Callable[[int], None] | N
   settings = json.loads(config.to_json())
   existing = read_manifest(out)
   if existing is not None:
-    if (config_upgrade.upgrade_synthetic(existing['config']) == settings
+    if (upgrade.upgrade_synthetic(existing['config']) == settings
         and existing['format_version'] == FORMAT_VERSION):
       return {**existing, 'reused': True}
     if not overwrite:

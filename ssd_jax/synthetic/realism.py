@@ -16,7 +16,7 @@ import ml_collections
 import numpy as np
 from scipy import spatial
 
-from ssd_jax import config_upgrade
+from ssd_jax.config_tools import upgrade
 from ssd_jax.data import io
 from ssd_jax.synthetic import dataset
 
@@ -104,7 +104,7 @@ def compare_with_real(data: str, real: str, stride: int) -> tuple[str, dict]:
   `data` (raw, front-camera crop, and as written) beside the real KITTI scans under `real`
   (kitti_object_velodyne/ raw, example/kitti_* processed) -> (Markdown table, stats)."""
   config = ml_collections.ConfigDict(
-      config_upgrade.upgrade_synthetic(dataset.read_manifest(data)['config']))
+      upgrade.upgrade_synthetic(dataset.read_manifest(data)['config']))
   raw, processed = [], []
   for seq in range(config.test_kitti.num_scenes):
     drive = dataset.make_drive(config, 'test_kitti', seq)
