@@ -15,6 +15,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
+from ssd_jax import geometry
 from ssd_jax.data.clean import check_cloud
 from ssd_jax.registration import cloud_features, leveling, pair_stages, prepared, verification
 from ssd_jax.registration import options as options_lib
@@ -122,16 +123,10 @@ class PairResult:
 class _Cloud:
   points: prepared.PreparedCloud   # on the grid, centred (`offset`), levelled (`Options.level`)
   features: cloud_features.FeatureLevels          # keypoints and descriptors of `points`
-  seconds: dict                    # read / grid / level, once
+  seconds: dict                    # read, grid, level and its first level's features, once
   level: leveling.Leveling         # how `points` was levelled
   own: prepared.PreparedCloud      # on the grid, centred, not levelled (ICP, assessment)
   offset: np.ndarray               # [3] the file's coordinates less these (`local_origin`)
-
-
-def _shift(offset: np.ndarray) -> np.ndarray:
-  t = np.eye(4)
-  t[:3, 3] = offset
-  return t
 
 
 class Registrar:
@@ -223,7 +218,8 @@ class Registrar:
                                  f'{os.path.basename(path2)}')
     offsets = [e.offset for e in entries]
     if any(o.any() for o in offsets):   # T maps p - o2 to q - o1: q = o1 + T (p - o2)
-      reg.transform = _shift(offsets[0]) @ reg.transform @ _shift(-offsets[1])
+      shift = lambda o: geometry.make_transform(np.eye(3), o)
+      reg.transform = shift(offsets[0]) @ reg.transform @ shift(-offsets[1])
       f1, f2 = (dataclasses.replace(f, xyz=f.xyz.astype(np.float64) + o)
                 for f, o in zip((f1, f2), offsets))
     return reg, f1, f2
