@@ -219,25 +219,22 @@ def from_gravity(gravity, center: np.ndarray | None = None) -> Leveling:
 MIN_TILT_DEG = 3.0
 
 
-def level_clouds(clouds, mode: str, names, sensor_at_origin: bool = True
-                 ) -> tuple[list[Leveling], list[str]]:
-  """Each cloud's `Leveling` (about its own coordinates' origin, the sensor's where
+def level_for(points: np.ndarray, mode: str, name: str, sensor_at_origin: bool = True
+              ) -> tuple[Leveling, str]:
+  """The `Leveling` of a cloud [N, 3] (about its coordinates' origin, the sensor's where
   `sensor_at_origin`) where `mode` ('none' or 'ground', `options.LEVELS`) asks for it,
-  and the one-line notes of what was done."""
+  and a one-line note of what was done ('' where nothing is worth saying)."""
   if mode == 'none':
-    return [unchanged() for _ in clouds], []
-  found = [level(c, min_tilt_deg=MIN_TILT_DEG, sensor_at_origin=sensor_at_origin)
-           for c in clouds]
-  notes = []
-  for name, lv in zip(names, found):
-    if lv.sparse:
-      notes.append(f'{name}: too few points to find its ground '
-                   f'(< {MIN_POINTS_TO_LEVEL:,}); used as it is')
-    elif lv.note:
-      notes.append(f'{name}: {lv.note}')
-    elif lv.turned:
-      notes.append(f'{name}: levelled, its ground {lv.tilt_deg:.1f} degrees off horizontal')
-  return found, notes
+    return unchanged(), ''
+  lv = level(points, min_tilt_deg=MIN_TILT_DEG, sensor_at_origin=sensor_at_origin)
+  if lv.sparse:
+    return lv, (f'{name}: too few points to find its ground (< {MIN_POINTS_TO_LEVEL:,}); '
+                'used as it is')
+  if lv.note:
+    return lv, f'{name}: {lv.note}'
+  if lv.turned:
+    return lv, f'{name}: levelled, its ground {lv.tilt_deg:.1f} degrees off horizontal'
+  return lv, ''
 
 
 def unlevel(reg, found):

@@ -173,10 +173,10 @@ class Registrar:
     if note:
       self._say(f'voxel: {name}: {note}')
     own = prepared.PreparedCloud(points)
-    (level,), notes = leveling.level_clouds([points], self._options.level, [name],
-                                            sensor_at_origin=not offset.any())
-    for line in notes:
-      self._say(line)
+    level, note = leveling.level_for(points, self._options.level, name,
+                                     sensor_at_origin=not offset.any())
+    if note:
+      self._say(note)
     points = level.apply(points)
     t3 = time.perf_counter()
     f = self.levels(points, self._options.keypoints)
