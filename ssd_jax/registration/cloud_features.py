@@ -186,30 +186,18 @@ def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: st
 
 def cloud_features(points: np.ndarray, keypoints: str = 'iss', descriptor: str = 'fpfh',
                    model=None, seed: int = 0, fpfh_max_nn: int = features.FPFH_MAX_NN,
-                   voxel: float | None = None, progress=None) -> CloudFeatures:
+                   voxel: float | None = None) -> CloudFeatures:
   """Keypoints of points [N, 3] (finite metres, within float32's centimetre range of the
   origin) and their descriptors, computed on the cloud put on the `voxel` m grid
-  (`to_grid`; None: `voxel_size_of(model)`, 0: every point as given). Keypoints are
-  points of that grid, in the input's coordinates. `progress(stage)`, if given, is
-  called as each stage starts. Raises ValueError on a malformed cloud or when the
-  detector finds fewer than 3 keypoints."""
+  (`to_grid`; None: `voxel_size_of(model)`, 0: every point as given): the one level of
+  `feature_levels`. Keypoints are points of that grid, in the input's coordinates.
+  Raises ValueError on a malformed cloud or when the detector finds fewer than 3."""
   points = check_cloud(points)
   t0 = time.perf_counter()
   points, _ = to_grid(points, voxel_size_of(model) if voxel is None else voxel)
-  t1 = time.perf_counter()
-  if progress is not None:
-    progress('keypoints')
-  idx, note = compute_keypoints(points, keypoints, model, seed)
-  if len(idx) < 3:
-    raise ValueError(f'{keypoints} keypoints: found {len(idx)} in a cloud of {len(points)} '
-                     'points, 3 are needed (too sparse, or planar / collinear?)')
-  t2 = time.perf_counter()
-  if progress is not None:
-    progress('descriptors')
-  desc = compute_descriptors(points, idx, descriptor, model, fpfh_max_nn=fpfh_max_nn)
-  t3 = time.perf_counter()
-  return CloudFeatures(points[idx], desc,
-                       {'grid': t1 - t0, 'keypoints': t2 - t1, 'descriptors': t3 - t2}, note)
+  grid = time.perf_counter() - t0
+  f = feature_levels(points, keypoints, descriptor, model, seed, fpfh_max_nn, 0).levels[-1]()
+  return dataclasses.replace(f, seconds={'grid': grid, **f.seconds})
 
 
 def domain_of(model) -> str:
