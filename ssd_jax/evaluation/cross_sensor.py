@@ -3,93 +3,24 @@ and distance of each pair, summarised as a sensor x distance matrix.
 
 Each cell holds success (RTE < 2 m and Euler-sum RRE < 5 degrees), RTE / RRE over its
 successful pairs and the inlier ratio (RANSAC inliers / nearest-neighbour matches, mean
-over its pairs). Besides the keypoint x descriptor rows of the project's pipeline, the
-row `open3d` is Open3D's own pipeline with the paper's searches
-(`registration.reference`): the outside reference the matrix is read against; the row
-`bev` is the bird's-eye-view search alone (`registration.bev`), its best poses verified.
+over its pairs). Its rows are `registration.register_pairs`': the register command's,
+the paper protocol's and the whole-cloud rows (`registration.CLOUD_ROWS`: Open3D's own
+pipeline, the outside reference the matrix is read against; KISS-Matcher + ICP; the
+bird's-eye-view search alone, its best poses verified).
 """
 
 from __future__ import annotations
 
-import json
 import os
-import time
-from typing import Mapping, Sequence, TextIO
+from typing import Mapping, Sequence
 
-import jax
 import numpy as np
-from tqdm import auto as tqdm
 
-from ssd_jax.infra import distributed, errors
 from ssd_jax.evaluation import feature_store, registration, tables
-from ssd_jax.registration import metrics, verification
-from ssd_jax.evaluation import reference
 
-# Rows that register whole clouds, without the project's keypoints and descriptors:
-# Open3D's own pipeline (the outside reference), and the bird's-eye-view search alone,
-# its best poses verified (what the descriptor adds to the register command's defaults
-# is read against it).
-REFERENCE_ROW = 'open3d'
-BEV_ROW = 'bev'
-KISS_ROW = 'kiss_matcher'
-CLOUD_ROWS = {REFERENCE_ROW: 'Open3D ISS + FPFH (paper searches)',
-              BEV_ROW: 'BEV search alone, verified',
-              KISS_ROW: 'KISS-Matcher + ICP (0.3 m voxels)'}
+
 def label(row: str) -> str:
-  return CLOUD_ROWS.get(row) or feature_store.row_label(row)
-
-
-def _register_clouds(row: str, store: feature_store.FeatureStore, pair, seed: int
-                     ) -> tuple[np.ndarray, dict]:
-  """One of `CLOUD_ROWS` on one pair -> (T_12 [4, 4], {'inliers', 'matches'})."""
-  if row == REFERENCE_ROW:
-    # ISS as the paper-protocol rows found it: Open3D's same call on the same cloud.
-    iss = tuple(store.keypoints(c, 'iss') for c in (pair.cloud1, pair.cloud2))
-    t, _, stats = reference.open3d_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2),
-                                            seed, 'paper', iss)
-    return t, stats
-  if row == KISS_ROW:
-    return reference.kiss_matcher_register(store.cloud(pair.cloud1), store.cloud(pair.cloud2)), {
-        'inliers': 0, 'matches': 0}
-  prepared = store.pair(pair.cloud1, pair.cloud2)
-  best, refined, _ = verification.verify(prepared.cloud1.target, prepared.cloud2.source,
-                                         prepared.bev_poses(feature_store.BEV_CANDIDATES),
-                                         memo=prepared.memo)
-  return refined[best], {'inliers': 0, 'matches': 0}
-
-
-def register_clouds(pairs: Sequence, store: feature_store.FeatureStore,
-                    row: str = REFERENCE_ROW, *, seed: int = 0, log: TextIO | None = None,
-                    progress: bool = True, desc: str = 'open3d') -> list[dict]:
-  """One of `CLOUD_ROWS` on every pair -> per-pair results in
-  `registration.register_pairs`' layout; RANSAC of pair n is seeded with
-  seed * 1,000,003 + n. A pair the method cannot register (e.g. ISS finds fewer than 3
-  keypoints) fails with its `error`, as the plain pipeline would stop there."""
-  if row not in CLOUD_ROWS:
-    raise errors.UserError(f'row {row!r} is not one of {sorted(CLOUD_ROWS)}')
-  one_process = jax.process_count() == 1
-
-  def register(n: int, pair) -> dict:
-    res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
-    t0 = time.perf_counter()
-    try:
-      t, stats = _register_clouds(row, store, pair, seed * 1_000_003 + n)
-    except ValueError as e:
-      res.update(registration.failed(str(e)))
-    else:
-      res.update(trials=0, inliers=stats['inliers'], matches=stats['matches'],
-                 seconds=time.perf_counter() - t0,
-                 **metrics.registration_errors(pair.transform, t))
-    if log is not None and one_process:
-      log.write(json.dumps(res) + '\n')
-    return res
-
-  results = distributed.map_items(
-      register, pairs, lambda ns: tqdm.tqdm(ns, desc=desc, unit='pair', disable=not progress))
-  if log is not None and not one_process:
-    for res in results:
-      log.write(json.dumps(res) + '\n')
-  return list(results)
+  return registration.CLOUD_ROWS.get(row) or feature_store.row_label(row)
 
 
 def distance_bin(distance: float, bins: Sequence[Sequence[float]]) -> str | None:

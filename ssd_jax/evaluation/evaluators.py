@@ -117,18 +117,17 @@ def _cross_sensor(name, ev, ctx: Context) -> Section:
   pairs = ctx.store.in_levelled_frames(pairs)
   cfg, rows = ctx.config, list(ev.rows)
   missing = dict(ctx.missing)
-  if cross_sensor.KISS_ROW in rows and reference.kiss_matcher is None:
-    missing[cross_sensor.KISS_ROW] = reference.KISS_MISSING
-  store_rows = [r for r in rows if r not in cross_sensor.CLOUD_ROWS]
+  if 'kiss_matcher' in rows and reference.kiss_matcher is None:
+    missing['kiss_matcher'] = reference.KISS_MISSING
+  described = feature_store.runnable_rows(
+      [r for r in rows if r not in registration.CLOUD_ROWS], ctx.missing)
+  runnable = [r for r in rows if r in described
+              or (r in registration.CLOUD_ROWS and r not in missing)]
   with open(ctx.workdir / f'{name}_pairs.jsonl', 'w') as log:
     results = registration.register_pairs(
-        pairs, feature_store.runnable_rows(store_rows, ctx.missing), ctx.store, seed=cfg.seed,
-        inlier_threshold=cfg.inlier_threshold, confidence=cfg.confidence,
-        max_trials=cfg.max_trials, log=log, desc=name,
+        pairs, runnable, ctx.store, seed=cfg.seed, inlier_threshold=cfg.inlier_threshold,
+        confidence=cfg.confidence, max_trials=cfg.max_trials, log=log, desc=name,
         sampling=cfg.get('sampling', 'auto'))
-    for row in (r for r in rows if r in cross_sensor.CLOUD_ROWS and r not in missing):
-      results[row] = cross_sensor.register_clouds(pairs, ctx.store, row, seed=cfg.seed, log=log,
-                                                  desc=f'{name} {row}')
   units = list(dict.fromkeys(info[p.idx1, p.idx2]['sensor2'] for p in pairs))
   overlap_bins = ev.get('overlap_bins', ())
   cells = cross_sensor.matrix(results, info, ev.distance_bins, overlap_bins)
@@ -246,7 +245,7 @@ EVALUATORS = {
     'figures': Evaluator(_figures, lambda config, ev: list(ev.registration_rows) + [
         f'{s}+fpfh' for s in ev.keypoint_sources]),
     'cross_sensor': Evaluator(_cross_sensor, lambda config, ev: [
-        r for r in ev.rows if r not in cross_sensor.CLOUD_ROWS]),
+        r for r in ev.rows if r not in registration.CLOUD_ROWS]),
 }
 TYPES = tuple(EVALUATORS)
 

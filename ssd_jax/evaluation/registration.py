@@ -16,8 +16,36 @@ from ssd_jax import geometry
 from ssd_jax.infra import distributed, errors
 from ssd_jax.data import clean, io
 from ssd_jax.evaluation import feature_store, paper, tables
-from ssd_jax.registration import metrics, pair_stages, pipeline
+from ssd_jax.evaluation import reference
+from ssd_jax.registration import metrics, pair_stages, pipeline, verification
 from ssd_jax.registration import options as options_lib
+
+
+# Rows that register whole clouds, without the project's keypoints and descriptors:
+# Open3D's own pipeline (the outside reference), KISS-Matcher + ICP, and the bird's-eye-view
+# search alone, its best poses verified (what the descriptor adds to the register
+# command's defaults is read against it).
+CLOUD_ROWS = {'open3d': 'Open3D ISS + FPFH (paper searches)',
+              'bev': 'BEV search alone, verified',
+              'kiss_matcher': 'KISS-Matcher + ICP (0.3 m voxels)'}
+
+
+def _register_whole(row: str, store: feature_store.FeatureStore, pair, seed: int
+                    ) -> tuple[np.ndarray, dict]:
+  """One of `CLOUD_ROWS` on one pair -> (T_12 [4, 4], {'inliers', 'matches'})."""
+  clouds = (store.cloud(pair.cloud1), store.cloud(pair.cloud2))
+  if row == 'open3d':
+    # ISS as the paper-protocol rows found it: Open3D's same call on the same cloud.
+    iss = tuple(store.keypoints(c, 'iss') for c in (pair.cloud1, pair.cloud2))
+    t, _, stats = reference.open3d_register(*clouds, seed, 'paper', iss)
+    return t, stats
+  if row == 'kiss_matcher':
+    return reference.kiss_matcher_register(*clouds), {'inliers': 0, 'matches': 0}
+  prepared = store.pair(pair.cloud1, pair.cloud2)
+  best, refined, _ = verification.verify(prepared.cloud1.target, prepared.cloud2.source,
+                                         prepared.bev_poses(feature_store.BEV_CANDIDATES),
+                                         memo=prepared.memo)
+  return refined[best], {'inliers': 0, 'matches': 0}
 
 
 def summarize(results: list[dict]) -> dict[str, float]:
@@ -49,8 +77,9 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   verifies its poses) runs its path, `pipeline.Registrar` on the pairs' files with RANSAC
   seeded with `seed`, and gives its verdict (`verdict.Verdict.to_json`) and the seconds
   the pair cost; a row of the paper's protocol registers the store's features
-  (`pair_stages.estimate`, `sampling` as there), pair n's RANSAC seeded with
-  seed * 1,000,003 + n, so that its numbers do not depend on the other rows. Each result
+  (`pair_stages.estimate`, `sampling` as there) and a `CLOUD_ROWS` row the store's
+  clouds, pair n's RANSAC seeded with seed * 1,000,003 + n, so that its numbers do not
+  depend on the other rows. Each result
   holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair with
   fewer than 3 keypoints in a cloud fails, with its `error`). With `log`, one JSON line per
   pair and row is written to it. Over several processes each registers its share of the
@@ -60,9 +89,10 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
   if sampling not in options_lib.SAMPLINGS:
     raise errors.UserError(f'sampling must be one of {options_lib.SAMPLINGS}, got {sampling!r}')
   one_process = jax.process_count() == 1
-  store.describe_fpfh_together(rows)
+  described = [row for row in rows if row not in CLOUD_ROWS]
+  store.describe_fpfh_together(described)
   registrars = {}
-  for row in rows:
+  for row in described:
     command = feature_store.command_options(row, store.models)
     if command is not None:
       options, model = command
@@ -76,25 +106,30 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
       res = {'row': row, 'sequence': pair.sequence, 'idx1': pair.idx1, 'idx2': pair.idx2}
       t0 = time.perf_counter()
       try:
-        if row in registrars:
-          reg, _, _ = registrars[row].register(str(pair.cloud1), str(pair.cloud2))
-          reg.transform = store.in_levelled_frame(pair.cloud1, pair.cloud2, reg.transform)
+        if row in CLOUD_ROWS:
+          t, stats = _register_whole(row, store, pair, seed * 1_000_003 + n)
+          res.update(trials=0, **stats, seconds=time.perf_counter() - t0)
         else:
-          reg = pair_stages.estimate(
-              store.features(pair.cloud1, row), store.features(pair.cloud2, row),
-              seed * 1_000_003 + n, inlier_threshold, confidence, max_trials,
-              feature_store.row_estimator(row), sampling=sampling)
+          if row in registrars:
+            reg, _, _ = registrars[row].register(str(pair.cloud1), str(pair.cloud2))
+            reg.transform = store.in_levelled_frame(pair.cloud1, pair.cloud2, reg.transform)
+            # the command's verdict, and what the pair cost it
+            res.update(seconds=time.perf_counter() - t0, **reg.verdict.to_json())
+          else:
+            reg = pair_stages.estimate(
+                store.features(pair.cloud1, row), store.features(pair.cloud2, row),
+                seed * 1_000_003 + n, inlier_threshold, confidence, max_trials,
+                feature_store.row_estimator(row), sampling=sampling)
+          t = reg.transform
+          res.update(trials=reg.trials, inliers=int(reg.inliers.sum()),
+                     matches=len(reg.inliers), levels=reg.levels_tried)
       except (io.CloudFileError, clean.CloudDataError):
         raise   # a damaged test file stops the benchmark, named
       except ValueError as e:   # too few keypoints, a cloud no keypoints register (too small,
         # flat): a failed pair, not a failed benchmark
-        res.update(failed(str(e)))
+        res = {k: res[k] for k in ('row', 'sequence', 'idx1', 'idx2')} | failed(str(e))
       else:
-        res.update(trials=reg.trials, inliers=int(reg.inliers.sum()), matches=len(reg.inliers),
-                   levels=reg.levels_tried,
-                   **metrics.registration_errors(pair.transform, reg.transform))
-        if row in registrars:   # the command's verdict, and what the pair cost it
-          res.update(seconds=time.perf_counter() - t0, **reg.verdict.to_json())
+        res.update(metrics.registration_errors(pair.transform, t))
       out.append(res)
       if log is not None and one_process:   # as it goes: a stopped run keeps its pairs
         log.write(json.dumps(res) + '\n')
