@@ -74,17 +74,17 @@ def register_pairs(pairs: Sequence, rows: Sequence[str], store: feature_store.Fe
 
   pairs: `registration_sets.RegistrationPair`s, T_12 between the clouds as `store` gives
   them. A row of the register command (`feature_store.command_options`: every row that
-  verifies its poses) runs its path, `pipeline.Registrar` on the pairs' files with RANSAC
-  seeded with `seed`, and gives its verdict (`verdict.Verdict.to_json`) and the seconds
-  the pair cost; a row of the paper's protocol registers the store's features
-  (`pair_stages.estimate`, `sampling` as there) and a `CLOUD_ROWS` row the store's
-  clouds, pair n's RANSAC seeded with seed * 1,000,003 + n, so that its numbers do not
-  depend on the other rows. Each result
-  holds RTE, RRE (Euler sum, geodesic), success, trials, inliers and matches (a pair with
-  fewer than 3 keypoints in a cloud fails, with its `error`). With `log`, one JSON line per
-  pair and row is written to it. Over several processes each registers its share of the
-  pairs (`distributed.map_items`) and every process returns all results; the log is
-  written when they are gathered.
+  verifies its poses) runs its path, `pipeline.Registrar` on the pairs' files with the
+  command's RANSAC settings seeded with `seed`, and gives its verdict
+  (`verdict.Verdict.to_json`) and the seconds the pair cost; a row of the paper's
+  protocol registers the store's features (`pair_stages.estimate` with `inlier_threshold`,
+  `confidence`, `max_trials` and `sampling`) and a `CLOUD_ROWS` row the store's clouds,
+  pair n's RANSAC seeded with seed * 1,000,003 + n, so that its numbers do not depend on
+  the other rows. Each result holds RTE, RRE (Euler sum, geodesic), success, trials,
+  inliers and matches (a pair with fewer than 3 keypoints in a cloud fails, with its
+  `error`). With `log`, one JSON line per pair and row is written to it. Over several
+  processes each registers its share of the pairs (`distributed.map_items`) and every
+  process returns all results; the log is written when they are gathered.
   """
   if sampling not in options_lib.SAMPLINGS:
     raise errors.UserError(f'sampling must be one of {options_lib.SAMPLINGS}, got {sampling!r}')
