@@ -52,8 +52,7 @@ class FeatureLevels:
 
   points [N, 3] metres (the search surface, near the origin); levels: per level, its
   sorted keypoint indices into points, or a callable that makes them on first use
-  (timed as 'keypoints'); describe(idx [k]) -> descriptors [k, D] at points[idx];
-  offset [3] added to the keypoints' coordinates (the cloud's frame, `local_origin`).
+  (timed as 'keypoints'); describe(idx [k]) -> descriptors [k, D] at points[idx].
   `levels` lists the callables `coarse_to_fine` takes, coarse first. Each point's
   descriptor is computed once, and `seconds['descriptors']` sums the time spent on
   them. A keypoint's descriptor does not depend on the others described with it
@@ -63,11 +62,9 @@ class FeatureLevels:
   """
 
   def __init__(self, points: np.ndarray, levels: Sequence,
-               describe: Callable[[np.ndarray], np.ndarray],
-               offset: np.ndarray | None = None, note: str = '',
+               describe: Callable[[np.ndarray], np.ndarray], note: str = '',
                seconds: dict | None = None):
     self._points, self._levels, self._describe = points, list(levels), describe
-    self._offset = np.zeros(3) if offset is None else np.asarray(offset, np.float64)
     self.note = note
     self.seconds = {'keypoints': 0.0, 'descriptors': 0.0, **(seconds or {})}
     # The points described so far (sorted indices [k]) and their descriptors [k, D].
@@ -100,7 +97,7 @@ class FeatureLevels:
       self._descriptors = (d if self._descriptors is None
                            else np.concatenate([self._descriptors, d]))[order]
       self.seconds['descriptors'] += time.perf_counter() - t0
-    xyz = np.asarray(self._points)[idx].astype(np.float64) + self._offset
+    xyz = np.asarray(self._points)[idx].astype(np.float64)
     rows = np.searchsorted(self._known, idx)
     return CloudFeatures(xyz, self._descriptors[rows], self.seconds, self.note)
 
@@ -245,13 +242,11 @@ def coarse_keypoints(verified: bool) -> int:
 def feature_levels(points: np.ndarray, keypoints: str = 'auto', descriptor: str = 'learned',
                    model=None, seed: int = 0, fpfh_max_nn: int = features.FPFH_MAX_NN,
                    coarse: int = COARSE_KEYPOINTS) -> FeatureLevels:
-  """The `FeatureLevels` of one cloud [N, 3] (on its grid already, any coordinates: the
-  features are made around `local_origin`, the keypoints returned in the input's): with
+  """The `FeatureLevels` of one cloud [N, 3] (metres on its grid already, near the
+  origin: `pipeline.Registrar` centres a far cloud first; described in float32): with
   'auto' keypoints and `coarse` > 0 two levels (`auto_levels`), else one. Nothing is
   described yet."""
-  points = check_cloud(points, dtype=np.float64)
-  offset = local_origin(points)
-  local = check_cloud(points - offset)
+  local = check_cloud(points)
   t0 = time.perf_counter()
   note = ''
   if keypoints == 'auto':
@@ -264,15 +259,14 @@ def feature_levels(points: np.ndarray, keypoints: str = 'auto', descriptor: str 
     levels = [idx]
   describe = lambda at: compute_descriptors(local, at, descriptor, model,
                                             fpfh_max_nn=fpfh_max_nn)
-  return FeatureLevels(local, levels, describe, offset, note,
+  return FeatureLevels(local, levels, describe, note,
                        seconds={'keypoints': time.perf_counter() - t0})
 
 
-def local_origin(*clouds: np.ndarray) -> np.ndarray:
-  """[3] float64: zero when float32 resolves every point of `clouds` ([N, 3] float64
-  metres) to clean.MAX_RESOLUTION, else the first cloud's centroid, the origin to
-  compute features around."""
-  reach = max(float(np.max(np.abs(c))) for c in clouds)
-  if np.spacing(np.float32(reach)) <= clean.MAX_RESOLUTION:
+def local_origin(points: np.ndarray) -> np.ndarray:
+  """[3] float64: zero when float32 resolves every point of `points` ([N, 3] float64
+  metres) to clean.MAX_RESOLUTION, else their centroid, the origin to compute features
+  around."""
+  if np.spacing(np.float32(np.max(np.abs(points)))) <= clean.MAX_RESOLUTION:
     return np.zeros(3)
-  return clouds[0].mean(axis=0)
+  return points.mean(axis=0)
