@@ -35,7 +35,8 @@ SHIPPED = {
     'ours': 'self-supervised descriptor (configs/training/ours.py)',
     'ours_detector': 'self-supervised descriptor and detector (configs/training/ours_detector.py)',
     'feat3dnet': 'weakly supervised 3DFeat-Net baseline (configs/training/feat3dnet.py)',
-    'ours_rescan': 'ours fine-tuned to match across sensors and standpoints (configs/training/ours_rescan.py)',
+    'ours_rescan': 'ours fine-tuned to match across sensors and standpoints '
+                   '(configs/training/ours_rescan.py)',
     'ours_mined': 'ours fine-tuned on pairs mined from a mixed-sensor drive '
                   '(configs/training/ours_mined.py)',
 }

@@ -16,8 +16,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 def test_train_step_benchmark_times_a_compiled_step():
   """One config's row, as the parent process collects it: a positive step time and the
   analytic FLOP count of `forward_flops` (3 x forward), beside XLA's own count."""
-  out = subprocess.run([sys.executable, '-m', 'experiments.benchmarks.training', '--child=paper_small',
-                        '--steps=1', '--breakdown=false'],
+  out = subprocess.run([sys.executable, '-m', 'experiments.benchmarks.training',
+                        '--child=paper_small', '--steps=1', '--breakdown=false'],
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
   assert out.returncode == 0, out.stderr[-3000:]
   row = json.loads([l for l in out.stdout.splitlines() if l.startswith('RESULT ')][-1][7:])

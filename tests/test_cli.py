@@ -26,7 +26,8 @@ def test_config_paths_resolve_to_the_project_from_anywhere(tmp_path, monkeypatch
   # A file of the user's own wins; names the project lacks stay as given (and fail later).
   (tmp_path / 'configs' / 'training').mkdir(parents=True)
   (tmp_path / 'configs' / 'training' / 'paper_small.py').write_text('')
-  assert cli.resolve_config_path('configs/training/paper_small.py') == 'configs/training/paper_small.py'
+  mine = 'configs/training/paper_small.py'
+  assert cli.resolve_config_path(mine) == mine
   assert cli.resolve_config_path('configs/no_such.py') == 'configs/no_such.py'
   assert cli.resolve_config_path('my/cfg.py') == 'my/cfg.py'
   args = ['prog', '--config', 'configs/training/ours.py', '--config.seed=1', '--workdir=w']

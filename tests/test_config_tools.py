@@ -99,7 +99,8 @@ def test_mined_pair_errors_name_the_value(tiny_config, tmp_path):
 
 def test_batch_must_split_over_devices(tiny_config):
   tiny_config.train.batch_size = 3
-  with pytest.raises(checks.ConfigError, match=r'batch_size \(3\) must be divisible by the 2 devices of the run'):
+  with pytest.raises(checks.ConfigError,
+                     match=r'batch_size \(3\) must be divisible by the 2 devices of the run'):
     checks.check_config(tiny_config, num_devices=2)
 
 
@@ -112,7 +113,8 @@ def test_runs_from_before_a_model_key_existed_resume_with_its_old_value(tiny_con
   tiny_config.model.triplet_hinge = 'cluster'
   checks.check_resumable(tiny_config, stored, 'old_run')      # what old runs used: accepted
   tiny_config.model.triplet_hinge = 'cloud'
-  with pytest.raises(checks.ConfigError, match="old_run holds a run with model.triplet_hinge='cluster'"):
+  with pytest.raises(checks.ConfigError,
+                     match="old_run holds a run with model.triplet_hinge='cluster'"):
     checks.check_resumable(tiny_config, stored, 'old_run')
   stored['objective'] = 'self_supervised'    # never used the triplet loss: nothing to refuse
   checks.check_resumable(tiny_config, stored, 'old_run')

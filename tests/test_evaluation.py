@@ -269,18 +269,18 @@ def test_evaluate_names_a_bad_type_and_missing_data(tmp_path):
 @pytest.mark.multiprocess
 def test_plot_keypoints_cli(synthetic_root, tmp_path):
   cloud = synthetic_root / 'test_kitti' / '00' / '000000.bin'
-  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints', f'--cloud={cloud}',
-                        f'--out={tmp_path / "k.png"}', '--sources=iss,random'], cwd=ROOT,
-                       capture_output=True, text=True, timeout=300)
+  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints',
+                        f'--cloud={cloud}', f'--out={tmp_path / "k.png"}', '--sources=iss,random'],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300)
   assert run.returncode == 0, run.stderr[-3000:]
   assert 'random: 1024 keypoints' in run.stdout and (tmp_path / 'k.png').stat().st_size > 10_000
-  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints', f'--cloud={cloud}',
-                        f'--out={tmp_path / "k.png"}', '--sources=iss,learned'], cwd=ROOT,
-                       capture_output=True, text=True, timeout=300)
+  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints',
+                        f'--cloud={cloud}', f'--out={tmp_path / "k.png"}', '--sources=iss,learned'],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300)
   assert run.returncode != 0 and 'learned keypoints need --checkpoint' in run.stderr
   # A shipped name, as every --checkpoint takes one.
-  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints', f'--cloud={cloud}',
-                        f'--out={tmp_path / "k.png"}', '--sources=learned',
+  run = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.plot_keypoints',
+                        f'--cloud={cloud}', f'--out={tmp_path / "k.png"}', '--sources=learned',
                         '--checkpoint=ours_detector'], cwd=ROOT, capture_output=True, text=True,
                        timeout=300)
   assert run.returncode == 0, run.stderr[-3000:]

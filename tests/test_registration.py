@@ -372,7 +372,8 @@ def test_a_dense_copy_registers_on_the_grid_to_the_same_transform(synthetic_root
                     'cloud 2: grid', 'cloud 2: keypoints', 'cloud 2: descriptors',
                     'RANSAC', 'ICP']
   gridded = reg_d.notes[0].split()
-  assert reg_d.notes[0] == f'voxel: cloud 1: {len(dense[0]):,} -> {gridded[5]} points on the 0.2 m grid'
+  assert reg_d.notes[0] == (f'voxel: cloud 1: {len(dense[0]):,} -> {gridded[5]} points on '
+                            'the 0.2 m grid')
   assert int(gridded[5].replace(",", "")) < 2 * len(c1)   # vs 12x as given
   assert metrics.registration_errors(pair.transform, reg.transform)['success']
   diff = geometry.invert_transform(reg.transform) @ reg_d.transform

@@ -20,8 +20,9 @@ def get_config() -> ml_collections.ConfigDict:
       # Weakly supervised 3DFeat-Net baseline on ours' network (configs/training/feat3dnet.py).
       'feat3dnet': 'feat3dnet',
       'ours_detector': 'ours_detector',     # self-supervised detector (extension)
-      'ours_rescan': 'ours_rescan',         # ours matching across sensors (configs/training/ours_rescan.py)
-      'ours_mined': 'ours_mined',           # ours trained on mined pairs (configs/training/ours_mined.py)
+      # ours matching across sensors (configs/training/ours_rescan.py)
+      'ours_rescan': 'ours_rescan',
+      'ours_mined': 'ours_mined',           # ours trained on mined pairs (its config in training/)
   })
   # keypoints+descriptor[+estimator[+verify[+bev]]]: keypoints iss | random | auto |
   # structure | a checkpoint name (its detector); descriptors fpfh | a checkpoint name;

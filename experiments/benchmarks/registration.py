@@ -259,9 +259,8 @@ def main(argv):
   if FLAGS.cold_pairs:
     for method in methods:
       with tempfile.TemporaryDirectory() as tmp:
-        paths = lambda p: (p.cloud1, p.cloud2)
-        _one_pair(method, paths(first[0]), tmp)   # fills the compilation cache
-        cold = [_one_pair(method, paths(p), tmp) for p in first[:FLAGS.cold_pairs]]
+        _one_pair(method, (first[0].cloud1, first[0].cloud2), tmp)   # fills the cache
+        cold = [_one_pair(method, (p.cloud1, p.cloud2), tmp) for p in first[:FLAGS.cold_pairs]]
       rows.append(('(first set)', method, 'cold: 1 pair, new process', len(cold),
                    [c[0] for c in cold], [metrics.registration_errors(p.transform, c[1])[
                        'success'] for p, c in zip(first, cold)]))
@@ -284,8 +283,9 @@ def _print(rows, stage_rows) -> None:
   print('|---|---|---|---|---|---|---|---|---|')
   for name, method, regime, n, seconds, ok in rows:
     median = float(np.median(seconds))
-    ratio = lambda anchor: ('-' if method != 'register' or (name, kind(regime), anchor)
-                            not in anchors else f'{median / anchors[name, kind(regime), anchor]:.2f}')
+    ratio = lambda anchor, key=(name, kind(regime)): (
+        '-' if method != 'register' or (*key, anchor) not in anchors
+        else f'{median / anchors[(*key, anchor)]:.2f}')
     success = '-' if ok is None else f'{100 * np.mean(ok):.1f} %'
     print(f'| {name} | {NAMES[method]} | {regime} | {n} | {median:.3f} | '
           f'{np.mean(seconds):.3f} | {success} | {ratio("kiss_matcher")} | {ratio("open3d")} |')

@@ -146,8 +146,9 @@ def main(argv):
   ceiling = matmul_ceiling_gflops()
   rows = []
   for name in FLAGS.configs:
-    out = subprocess.run([sys.executable, '-m', 'experiments.benchmarks.training', f'--child={name}',
-                          f'--steps={FLAGS.steps}', f'--breakdown={FLAGS.breakdown}'],
+    out = subprocess.run([sys.executable, '-m', 'experiments.benchmarks.training',
+                          f'--child={name}', f'--steps={FLAGS.steps}',
+                          f'--breakdown={FLAGS.breakdown}'],
                          capture_output=True, text=True, check=False)
     lines = [l for l in out.stdout.splitlines() if l.startswith('RESULT ')]
     if out.returncode or not lines:

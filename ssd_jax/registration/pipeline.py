@@ -167,8 +167,7 @@ class Registrar:
     points = check_cloud(self._read(path), name, np.float64)
     t1 = time.perf_counter()
     offset = cloud_features.local_origin(points)
-    points, note = cloud_features.to_grid(check_cloud(points - offset, name, np.float64),
-                                          self.voxel)
+    points, note = cloud_features.to_grid(points - offset, self.voxel)   # checked above
     t2 = time.perf_counter()
     if note:
       self._say(f'voxel: {name}: {note}')
