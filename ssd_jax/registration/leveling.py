@@ -34,11 +34,25 @@ OFF_SENSOR_MAX_TILT_DEG = 15.0
 # (a KITTI scan with its ground cut away found one 4-11 degrees off).
 PLANE_DISTANCE = 0.15
 NORMAL_AGREEMENT_DEG = 30.0
-# The ground holds at least this share of the scan's points and MIN_GROUND_POINTS (a real
-# far sparse re-scan's best plane held 202 points, 15 degrees off; the tilted re-scans'
-# grounds hold 556 or more).
+# The ground holds at least this share of the scan's points and MIN_GROUND_POINTS (a car's
+# spinning unit sees 35-40 % of its points there; a level band through the bushes and car
+# hoods of a KITTI scan with its ground cut away holds 4-5 %; a hand-held solid-state
+# unit's ground 250-300 points of 2,500 on the 0.2 m grid).
 MIN_GROUND_SHARE = 0.1
-MIN_GROUND_POINTS = 400
+MIN_GROUND_POINTS = 200
+# A plane tilted PITCHED_DEG or more may hold less: PITCHED_GROUND_SHARE and
+# PITCHED_GROUND_POINTS, where at most MAX_BELOW_SHARE of the scan lies more than
+# BELOW_DISTANCE metres beneath it. A hand-held solid-state unit (~70 degrees of view)
+# pitched up by 15-25 degrees sees its ground only in the lowest part of its view: 3-5 %
+# of its points on the 0.2 m grid (100-200 of 2,500-5,000, 1.2-1.8 m below it), nothing
+# beneath. A small slanted plane that is no ground has the scene on both sides of it (a
+# plane through the distant walls of a KITTI scan with its ground cut away: 41 % beneath;
+# a real road's ground 0-10 %, where the road goes downhill beyond it).
+PITCHED_DEG = 10.0
+PITCHED_GROUND_SHARE = 0.03
+PITCHED_GROUND_POINTS = 100
+MAX_BELOW_SHARE = 0.1
+BELOW_DISTANCE = 0.5
 # A scan with fewer points is used as it is: a sparse unit far away returns a few hundred
 # ground points at most, too few to tell a missing ground from one it barely saw (real
 # cross-sensor re-scans of 576-1,042 points found none, or a wrong plane; tilted re-scans
@@ -114,9 +128,10 @@ def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
   """The ground plane of a scan: points [N, 3] metres -> (unit normal [3] pointing up, the
   height of the sensor (else of the points' centroid) above the plane in metres, the
   scan's points on it, estimated from those searched), or None where no plane within
-  `max_tilt_deg` of z holds MIN_GROUND_SHARE of the points (a scan of walls alone, a
-  tunnel). With `sensor_at_origin` (a scan in its sensor's frame) the plane must also lie
-  MIN_SENSOR_HEIGHT below the sensor, which rules out a ceiling or a roof."""
+  `max_tilt_deg` of z holds MIN_GROUND_SHARE of the points, or, tilted by PITCHED_DEG or
+  more, PITCHED_GROUND_SHARE with at most MAX_BELOW_SHARE beneath it (a scan of walls
+  alone, a tunnel). With `sensor_at_origin` (a scan in its sensor's frame) the plane
+  must also lie MIN_SENSOR_HEIGHT below the sensor, which rules out a ceiling or a roof."""
   points = np.asarray(points, np.float64)
   stride = preprocess.even_stride(len(points), SEARCH_POINTS)
   pts = points[::stride]
@@ -166,9 +181,14 @@ def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
   # Each searched point stands for `len(points) / len(pts)` of the scan's.
   refit = on(normal[:, None].astype(np.float32), np.float32(height))[:, 0]
   count = int(round(refit.sum() * len(points) / len(pts)))
-  if (count < max(MIN_GROUND_POINTS, MIN_GROUND_SHARE * len(points)) or height < floor
-      or normal[2] < cos_max):
+  if height < floor or normal[2] < cos_max:
     return None
+  if count < max(MIN_GROUND_POINTS, MIN_GROUND_SHARE * len(points)):
+    pitched = (normal[2] <= np.cos(np.deg2rad(PITCHED_DEG))
+               and count >= max(PITCHED_GROUND_POINTS, PITCHED_GROUND_SHARE * len(points))
+               and np.mean(pts @ normal + height < -BELOW_DISTANCE) <= MAX_BELOW_SHARE)
+    if not pitched:
+      return None
   return normal, height, count
 
 
@@ -192,7 +212,8 @@ def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
   if found is None:
     return unchanged(center, 'no ground plane found to level it by (a plane below the '
                      f'sensor within {MAX_TILT_DEG:g} degrees of its z axis, holding '
-                     f'{MIN_GROUND_SHARE:.0%} of its points)')
+                     f'{MIN_GROUND_SHARE:.0%} of its points, {PITCHED_GROUND_SHARE:.0%} '
+                     f'where tilted {PITCHED_DEG:g} degrees or more)')
   normal = found[0]
   tilt = float(np.degrees(np.arccos(np.clip(normal[2], -1.0, 1.0))))
   if tilt < min_tilt_deg:
