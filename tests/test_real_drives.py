@@ -4,6 +4,7 @@ their evaluation (configs/evals/real_drives.py)."""
 import numpy as np
 import pytest
 
+from experiments.data import make_real_pairs
 from ssd_jax.configs.evals import real_drives as real_drives_config
 from ssd_jax.data import clean, io, real_drives, registration_sets
 from ssd_jax.evaluation import evaluators
@@ -58,7 +59,7 @@ def test_a_real_drive_set_and_its_evaluation(tmp_path):
     assert meta['overlap'] > 0.7 and 2.0 <= meta['distance_m'] < 5.0
   assert abs(info[pairs[1].idx1, pairs[1].idx2]['yaw_deg']) > 130   # turned ~180 degrees
   config = real_drives_config.get_config()
-  del config.evals.livox
+  del config.evals.livox, config.evals.riverside
   config.evals.drives.dataset = str(out)
   config.evals.drives.rows = ('register', 'bev')
   config.checkpoints = {'ours': 'ours'}
@@ -68,3 +69,21 @@ def test_a_real_drive_set_and_its_evaluation(tmp_path):
   cells = [c.strip() for c in summary.split('|')[1:-1]]
   assert cells[1] == '100.0', summary   # both pairs (2.6 m apart, 0.89 overlap)
   assert cells[-2] == '100.0 (2)' and cells[-1] == '-', summary
+
+
+@pytest.mark.real_data
+def test_a_pair_whose_drive_pose_does_not_hold_up_is_replaced(tmp_path):
+  """Scans 0 and 2 of a real drive under its pose hold up; under the pose 8 m off along the
+  road (what a SLAM run away in a degenerate stretch gives) over a quarter of a scan's structure
+  lies where the other's rays passed, and `make_set` replaces the pair."""
+  drive = real_drives.read_drive(shared_path('real_drives', 'kitti00'))
+  scans = [clean.clean_cloud(io.read_cloud(drive.scans[s]), '', np.float64) for s in (0, 2)]
+  t12 = np.linalg.inv(drive.poses[0]) @ drive.poses[2]
+  assert make_real_pairs.pose_holds(*scans, t12)
+  off = t12.copy()
+  off[:3, 3] += t12[:3, :3] @ np.array([8.0, 0.0, 0.0])
+  assert not make_real_pairs.pose_holds(*scans, off)
+  rows = real_drives.make_set([shared_path('real_drives', 'kitti00')], tmp_path, [(2.0, 5.0)],
+                              per_bin=1, turned=False,
+                              pose_holds=lambda a, b, t: len(a) != len(scans[0]))
+  assert len(rows) == 1 and not rows[0]['source'].startswith('kitti00/000000-')

@@ -2,13 +2,15 @@
 degrees, scored against the drive's own poses; success by drive, distance and overlap, the
 verdict's precision and recall, and the outside anchors beside the register defaults.
 
-Command (the sets first: the five drives beside the project, and a Livox Avia run with
-revisits, the Fast-LIO2_SC-SLAM output folder HKU_MB_2020-09-20-13-34-51_bag, wherever it
-was put):
+Command (the sets first: the five drives beside the project; from the Fast-LIO2_SC-SLAM
+output folders, wherever they were put, a Livox Avia run with revisits and the whole
+OS1-64 run along a river whose first 32 keyframes are among the five):
 
     python -m experiments.data.make_real_pairs --drives='real_drives/*' --out=data_cache/real_drives
     python -m experiments.data.make_real_pairs --real=PATH/TO/Fast-LIO2_SC-SLAM/output \
         --drives=HKU_MB_2020-09-20-13-34-51_bag --out=data_cache/hku_mb_pairs
+    python -m experiments.data.make_real_pairs --real=PATH/TO/Fast-LIO2_SC-SLAM/output \
+        --drives=new_Riverside02_bag_281 --per_bin=16 --out=data_cache/riverside02_pairs
     python -m experiments.evaluate --config=configs/evals/real_drives.py --workdir=runs/real_drives
 
 Rows: the register command's defaults with `ours` and with FPFH, and `ours` alone
@@ -19,7 +21,7 @@ the report says so. Open3D's row takes ~13 s a pair on the five drives' scans: d
 (`--config.evals.drives.rows=...`) for a quick run.
 
 Expected (2-core VM): the defaults with `ours` register 91.6 % of the five drives' 214
-pairs and 48.8 % of the Livox drive's 80; docs/notes/real_drives.md has the tables and
+pairs and 53.8 % of the Livox drive's 80; docs/notes/real_drives.md has the tables and
 what each stage loses.
 """
 
@@ -45,4 +47,6 @@ def get_config() -> ml_collections.ConfigDict:
                                     'Real drives beside the project (five units)')
   config.evals.livox = real_drives('data_cache/hku_mb_pairs',
                                    'A Livox Avia drive with revisits (HKU_MB)')
+  config.evals.riverside = real_drives('data_cache/riverside02_pairs',
+                                       'An OS1-64 drive along a river, all 281 keyframes')
   return config

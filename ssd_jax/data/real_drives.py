@@ -108,14 +108,18 @@ def overlap(points1: np.ndarray, points2: np.ndarray, transform: np.ndarray,
 def make_set(drive_folders: Sequence[str | os.PathLike], out: str | os.PathLike,
              bins: Sequence[Sequence[float]], per_bin: int = 8, seed: int = 0,
              turned: bool = True, min_rotation_deg: float = 20.0,
-             min_overlap: float = MIN_OVERLAP, progress=None) -> list[dict]:
+             min_overlap: float = MIN_OVERLAP,
+             pose_holds: Callable[[np.ndarray, np.ndarray, np.ndarray], bool] | None = None,
+             progress=None) -> list[dict]:
   """Writes a registration set (sequence-folder layout, `registration_sets`): OUT/%06d.bin
   (x y z + normals), OUT/groundtruths.txt and OUT/pairs.tsv whose `sensor2` is the drive
   and `overlap` the pair's measured overlap (pairs under `min_overlap` left out, as
-  `choose_pairs`' unusable ones). The scans are numbered drive after drive (scan s of the
-  first drive is OUT/s, of the second OUT/(S1 + s), ...); the turned copy of cloud 2 at
-  line n of groundtruths.txt follows them all (OUT/(S + n), S the scans of every drive)
-  and draws its turn from `default_rng((seed, n))`. -> the pairs.tsv rows."""
+  `choose_pairs`' unusable ones, and those where `pose_holds(scan i, scan j, T_12)` is
+  False: a drive's poses are wrong where its SLAM ran away in a degenerate stretch). The
+  scans are numbered drive after drive (scan s of the first drive is OUT/s, of the second
+  OUT/(S1 + s), ...); the turned copy of cloud 2 at line n of groundtruths.txt follows them
+  all (OUT/(S + n), S the scans of every drive) and draws its turn from
+  `default_rng((seed, n))`. -> the pairs.tsv rows."""
   out = Path(out)
   out.mkdir(parents=True, exist_ok=True)
   drives = [read_drive(f) for f in drive_folders]
@@ -141,7 +145,9 @@ def make_set(drive_folders: Sequence[str | os.PathLike], out: str | os.PathLike,
     return shares[d, i, j]
 
   for d, drive in enumerate(drives):
-    usable = lambda i, j, d=d: share(d, i, j) >= min_overlap
+    def usable(i, j, d=d):
+      return share(d, i, j) >= min_overlap and (pose_holds is None or pose_holds(
+          scan(d, i), scan(d, j), groundtruth.relative_pose(drives[d].poses, i, j)))
     for i, j, _ in choose_pairs(drive.poses, bins, per_bin, min_rotation_deg, usable):
       t12 = groundtruth.relative_pose(drive.poses, i, j)
       cloud2 = scan(d, j, write=True)
