@@ -22,10 +22,10 @@ it trains the paper's single-scan objective alone. Last, with `--keypoints=auto`
 adapted model's descriptor alone registers 32 pairs farther apart than the miner reached
 (each two kept pairs chained) twice, its keypoints sampled from all points and from the
 structure above the ground, and the export keeps the domain that registers more
-(`registration.keypoint_choice`; 'structure' where the sensor's ground rings mislead its
-matches). OUT/run holds the training run (rerun the command to resume it, mining too); OUT
-holds the exported model (config.json, weights.msgpack) and MODEL_CARD.md (base model,
-scans, pairs, steps, keypoints, wall time, machine, command).
+(`adaptation.keypoint_choice`; 'structure' on a tie: the sensor's own ground rings can
+only mislead its matches). OUT/run holds the training run (rerun the command to resume it,
+mining too); OUT holds the exported model (config.json, weights.msgpack) and MODEL_CARD.md
+(base model, scans, pairs, steps, keypoints, wall time, machine, command).
 docs/notes/speed.md times it on 2 CPU cores.
 """
 

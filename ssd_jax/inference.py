@@ -66,8 +66,8 @@ class Model:
       `registration.pipeline` puts every cloud before describing it.
     keypoints: `KEYPOINT_SELECTIONS`, what registration's 'auto' keypoints are sampled
       from: 'all' (the whole cloud) or 'structure' (the points above its ground;
-      `experiments.adapt` picks it for a sensor where it registers more of the mined
-      pairs).
+      `experiments.adapt` picks it for a sensor unless all points register more of
+      the mined pairs).
   """
   net: network.FeatureNet
   variables: Any

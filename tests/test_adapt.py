@@ -155,6 +155,18 @@ def test_choice_pairs_reach_past_the_miners_gaps_by_chaining_two_kept_pairs():
   assert keypoint_choice.choose(None, [pair(0, 1, kept=False)], np.load) is None
 
 
+def test_the_choice_keeps_the_structure_unless_all_points_register_more(monkeypatch):
+  pairs = [mined_pairs.MinedPair(f's{i:02d}', f's{i + g:02d}', g, np.eye(4), 0.5, True, True)
+           for g in (1, 2) for i in range(30)]
+  for counts, want in (({'all': 12, 'structure': 12}, 'structure'),
+                       ({'all': 13, 'structure': 12}, 'all'),
+                       ({'all': 3, 'structure': 7}, 'structure')):
+    monkeypatch.setattr(keypoint_choice, 'registered',
+                        lambda model, sample, read, domain, counts=counts: counts[domain])
+    choice = keypoint_choice.choose(None, pairs, np.load, count=8)
+    assert choice.keypoints == want and choice.registered == counts, counts
+
+
 @pytest.mark.real_data
 @pytest.mark.slow
 def test_the_choice_counts_the_pairs_each_domain_registers_against_the_miners_transforms(

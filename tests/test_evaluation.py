@@ -475,6 +475,18 @@ def test_rows_of_the_register_command_register_as_the_command_does(tmp_path):
       assert got['success'], (row, got)
 
 
+def test_a_command_row_describes_with_the_models_own_keypoints():
+  # An adapted export may keep its keypoints on the structure (`experiments.adapt`): the
+  # register command samples them there, and so does its row; a named row says its own.
+  adapted = dataclasses.replace(pretrained.load('ours'), keypoints='structure')
+  for row, want in (('register', 'structure'), ('register_descriptor', 'structure'),
+                    ('auto+ours+upright+verify+bev', 'all'),
+                    ('structure+ours+upright+verify+bev', 'structure')):
+    _, model = feature_store.command_options(row, {'ours': adapted})
+    assert model.keypoints == want, row
+    assert cloud_features.domain_of(model) == want, row
+
+
 def test_feature_store_takes_as_many_farthest_point_keypoints_as_asked(tmp_path):
   rng = np.random.default_rng(0)
   cloud = rng.uniform(-30, 30, (5000, 3)).astype(np.float32)

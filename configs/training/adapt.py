@@ -14,9 +14,9 @@ rotation loss (`model.partner_centers`, `model.contrastive_weight` 1). A drive o
 than `mining.max_scans` scans is mined on every k-th; after half the steps the model
 trained so far mines the next two doubled gaps (`mining.widen_rounds`, EYOC's widening)
 and the rest train on every kept pair. Last, the command sets the export's
-`inference.keypoints`: 'structure' (keypoints above the ground) where the adapted
-descriptor alone registers more of 32 chained mined pairs past the miner's gaps from
-there than from all points (`adaptation.keypoint_choice`), else 'all'. Each scan must be
+`inference.keypoints`: 'all' where the adapted descriptor alone registers more of 32
+chained mined pairs past the miner's gaps from all points than from the structure above
+the ground (`adaptation.keypoint_choice`), else 'structure'. Each scan must be
 one sweep centred on its sensor (z up), in capture order by name.
 
 Expected (`configs/evals/adaptation_os0.py`: a unit no shipped model saw): the descriptor

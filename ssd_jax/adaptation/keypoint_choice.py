@@ -7,7 +7,12 @@ among those rings outvote the structure's and pull two standpoints together
 (docs/notes/cross_sensor.md); across units, whose rings differ, the ground's matches
 help. So `experiments.adapt` registers mined pairs with the adapted model, its descriptor
 alone, once from each keypoint domain of `inference.KEYPOINT_SELECTIONS`, against the
-miner's transforms, and keeps the domain that registers more ('all' on a tie).
+miner's transforms, and keeps the domain that registers more. On a tie it keeps
+'structure': the pairs a user registers with an adapted model are two scans of that one
+unit, whose rings can only mislead, most of all far apart. On the Livox drive of
+docs/notes/real_drives.md four adaptations of five tied, and from the structure the
+register command's defaults registered 2-6 of its 80 pairs more than from all points;
+every adaptation of docs/notes/cross_sensor.md chose the structure outright.
 
 The pairs the miner keeps are those its teacher registers with confidence: on the OS0-64
 drive the adapted descriptor registered all 32 of the farthest from either domain. The
@@ -88,12 +93,12 @@ def registered(model: inference.Model, pairs: Sequence[mined_pairs.MinedPair],
 
 def choose(model: inference.Model, pairs: Sequence[mined_pairs.MinedPair],
            read: Callable[[str], np.ndarray], count: int = CHOICE_PAIRS) -> Choice | None:
-  """The keypoint domain that registers more of the `choice_pairs` ('all' unless
-  'structure' registers strictly more); None where there are none."""
+  """The keypoint domain that registers more of the `choice_pairs` ('structure' unless
+  'all' registers strictly more); None where there are none."""
   sample = choice_pairs(pairs, count)
   if not sample:
     return None
   counts = {k: registered(model, sample, read, k) for k in inference.KEYPOINT_SELECTIONS}
-  best = 'structure' if counts['structure'] > counts['all'] else 'all'
+  best = 'all' if counts['all'] > counts['structure'] else 'structure'
   return Choice(best, counts, len(sample), (min(p.gap for p in sample),
                                             max(p.gap for p in sample)))

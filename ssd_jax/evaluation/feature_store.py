@@ -99,11 +99,12 @@ def split_row(row: str) -> tuple[str, str]:
 
 def command_options(row: str, models: Mapping) -> tuple[options_lib.Options, object] | None:
   """(the register command's options, the `inference.Model` or None) a row registers
-  with through `pipeline.Registrar`: a `COMMAND_ROWS` name, or a row that verifies its
-  poses (its keypoints 'auto', or 'structure' with a learned descriptor: the model's
-  `keypoints`; its estimator; VERIFY_CANDIDATES; BEV_CANDIDATES with 'bev'). None for a
-  row of the paper's protocol, registered from this store's features. models: {name:
-  `inference.Model`} holding the row's descriptor."""
+  with through `pipeline.Registrar`: a `COMMAND_ROWS` name (the model as it is: its own
+  keypoint domain, an adapted export's 'structure' included), or a row that verifies its
+  poses (its keypoints 'auto', all points, or 'structure' with a learned descriptor: the
+  model's `keypoints`; its estimator; VERIFY_CANDIDATES; BEV_CANDIDATES with 'bev'). None
+  for a row of the paper's protocol, registered from this store's features. models:
+  {name: `inference.Model`} holding the row's descriptor."""
   kp, desc = split_row(row)
   if row in COMMAND_ROWS:
     fields = COMMAND_ROWS[row][2]
@@ -118,6 +119,8 @@ def command_options(row: str, models: Mapping) -> tuple[options_lib.Options, obj
     return None
   if desc in BUILTIN_DESCRIPTORS:
     return options_lib.Options(descriptor=desc, **fields), None
+  if row in COMMAND_ROWS:   # the model's own keypoint domain, as the command takes it
+    return options_lib.Options(**fields), models[desc]
   model = dataclasses.replace(models[desc], keypoints='all' if kp == 'auto' else kp)
   return options_lib.Options(**fields), model
 
