@@ -183,12 +183,12 @@ def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
   count = int(round(refit.sum() * len(points) / len(pts)))
   if height < floor or normal[2] < cos_max:
     return None
-  if count < max(MIN_GROUND_POINTS, MIN_GROUND_SHARE * len(points)):
-    pitched = (normal[2] <= np.cos(np.deg2rad(PITCHED_DEG))
-               and count >= max(PITCHED_GROUND_POINTS, PITCHED_GROUND_SHARE * len(points))
-               and np.mean(pts @ normal + height < -BELOW_DISTANCE) <= MAX_BELOW_SHARE)
-    if not pitched:
-      return None
+  enough = count >= max(MIN_GROUND_POINTS, MIN_GROUND_SHARE * len(points))
+  pitched = (normal[2] <= np.cos(np.deg2rad(PITCHED_DEG))
+             and count >= max(PITCHED_GROUND_POINTS, PITCHED_GROUND_SHARE * len(points))
+             and np.mean(pts @ normal + height < -BELOW_DISTANCE) <= MAX_BELOW_SHARE)
+  if not (enough or pitched):
+    return None
   return normal, height, count
 
 
