@@ -8,16 +8,11 @@
 
 The network runs jitted on clusters of a fixed chunk size (the last chunk is
 padded and its outputs dropped). Each cluster's points are gathered on the host, so
-the network compiles once whatever the cloud's and keypoint set's size; the dense
-ball query pads clouds to power-of-two size buckets (masked) and compiles once per
-bucket. Neighbourhoods are PointNet++ ball queries (the first c
-points within r in index order, padded by repeating the first). Two paths give
-identical results:
-  * 'kdtree': a host KD-tree (scipy) finds the neighbours, far faster on CPU for
-    large clouds (docs/notes/speed.md);
-  * 'dense': `grouping.ball_query` in JAX, a dense [chunk, N] distance matrix,
-    with the cloud padded to a power-of-two bucket.
-Clouds are put in a seeded random order first, so that "first c in index
+the network compiles once whatever the cloud's and keypoint set's size. Neighbourhoods
+are PointNet++ ball queries (the first c points within r in index order, padded by
+repeating the first), found by a host KD-tree (scipy), far faster on CPU for large
+clouds than `grouping.ball_query`'s dense distances, which `describe_fn` uses inside
+JAX, with the same clusters (tested). Clouds are put in a seeded random order first, so that "first c in index
 order" is a random sample of the ball, as in training (`describe` finds each ball
 once and, for each draw, keeps the members that come first in that draw's order).
 """
@@ -37,15 +32,13 @@ from scipy import spatial
 
 from ssd_jax import grouping, network
 from ssd_jax.config_tools import upgrade
-from ssd_jax.infra import errors, padding
+from ssd_jax.infra import errors
 from ssd_jax.data.clean import check_cloud
 
-SEARCHES = ('kdtree', 'dense')
 # Where registration's default keypoints are sampled with a model (its config's
 # `inference.keypoints`, `registration.pipeline.keypoint_domain`): the whole cloud, or the
 # points above its ground.
 KEYPOINT_SELECTIONS = ('all', 'structure')
-DENSE_CHUNK = 512   # centers per dense ball query ([DENSE_CHUNK, N] distances)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,11 +165,6 @@ def _network_kernel():
                  compiler_options=_compiler_options())
 
 
-@functools.partial(jax.jit, static_argnames=('radius', 'num_samples'))
-def _dense_neighbourhoods(points, valid, centers, *, radius, num_samples):
-  return grouping.ball_query(points, centers, radius, num_samples, valid)
-
-
 def describe_fn(model: Model, shuffle: bool = True):
   """`describe` as a pure JAX function, for use inside other JAX code.
 
@@ -221,18 +209,18 @@ def describe_fn(model: Model, shuffle: bool = True):
 
 
 def neighbourhoods(model: Model, points: np.ndarray, keypoints: np.ndarray,
-                   search: str = 'kdtree', seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                   seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
   """The clusters `describe` groups at keypoints [K, 3] in points [N, 3] (metres):
   idx [draws * K, c] point indices (draw-major), has_neighbour [draws * K] bool. They
   depend on the model's radius, num_samples and draws only, so models that share those
   share them (`describe(..., clusters=)`)."""
   points = check_cloud(points)
   keypoints = check_cloud(keypoints, 'keypoints')
-  return _neighbourhoods(model, points, keypoints, search, _order_seeds(model.draws, seed))
+  return _neighbourhoods(model, points, keypoints, _order_seeds(model.draws, seed))
 
 
-def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: str = 'kdtree',
-             chunk: int = 256, seed: int = 0,
+def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, chunk: int = 256,
+             seed: int = 0,
              clusters: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
   """Learned descriptors at keypoints.
 
@@ -241,39 +229,35 @@ def describe(model: Model, points: np.ndarray, keypoints: np.ndarray, search: st
   samplings of each ball). The balls are found once; every draw is a different random
   subset of each, and the clusters of all draws go through the network together, in
   chunks of `chunk` (one compiled shape whatever the cloud's or keypoint set's size).
-  clusters: `neighbourhoods(model, points, keypoints, search, seed)` where already found.
+  clusters: `neighbourhoods(model, points, keypoints, seed)` where already found.
   """
   points = check_cloud(points)
   keypoints = check_cloud(keypoints, 'keypoints')
   order_seeds = _order_seeds(model.draws, seed)
-  idx, has = (_neighbourhoods(model, points, keypoints, search, order_seeds)
+  idx, has = (_neighbourhoods(model, points, keypoints, order_seeds)
               if clusters is None else clusters)
   centers = np.tile(keypoints, (len(order_seeds), 1))
   descriptors = _run_groups(model, points[idx], centers, has, chunk, 'describe')
   return _mean_over_draws(descriptors, len(order_seeds))
 
 
-def _neighbourhoods(model: Model, points: np.ndarray, centers: np.ndarray, search: str,
+def _neighbourhoods(model: Model, points: np.ndarray, centers: np.ndarray,
                     order_seeds: list) -> tuple[np.ndarray, np.ndarray]:
-  """The clusters at centers [K, 3] of every point order in `order_seeds` (draw-major):
-  idx [draws * K, c] original point indices, has_neighbour [draws * K] bool."""
-  if search not in SEARCHES:
-    raise ValueError(f'search must be one of {SEARCHES}, got {search!r}')
-  if search == 'kdtree':
-    # cKDTree tests d <= r; ball_query tests d^2 < r^2. Shrinking r by one ulp makes
-    # the boundary case agree.
-    radius = np.nextafter(model.radius, 0)
-    if len(order_seeds) == 1:
-      idx, has = zip(_first_in_prefix(points, centers, radius,
-                                      _permutation(len(points), order_seeds[0]),
-                                      model.num_samples))
-    else:   # the balls once, every draw's members from them
-      balls = [np.asarray(b, np.int64)
-               for b in spatial.cKDTree(points).query_ball_point(centers, radius)]
-      idx, has = zip(*(_first_in_order(balls, _permutation(len(points), s), model.num_samples)
-                       for s in order_seeds))
-  else:
-    idx, has = zip(*(_dense_first_in_order(model, points, centers, s) for s in order_seeds))
+  """The clusters at centers [K, 3] of every point order in `order_seeds` (draw-major),
+  `grouping.ball_query`'s on the shuffled cloud found by a host KD-tree: idx [draws * K,
+  c] original point indices, has_neighbour [draws * K] bool."""
+  # cKDTree tests d <= r; ball_query tests d^2 < r^2. Shrinking r by one ulp makes the
+  # boundary case agree.
+  radius = np.nextafter(model.radius, 0)
+  if len(order_seeds) == 1:
+    idx, has = zip(_first_in_prefix(points, centers, radius,
+                                    _permutation(len(points), order_seeds[0]),
+                                    model.num_samples))
+  else:   # the balls once, every draw's members from them
+    balls = [np.asarray(b, np.int64)
+             for b in spatial.cKDTree(points).query_ball_point(centers, radius)]
+    idx, has = zip(*(_first_in_order(balls, _permutation(len(points), s), model.num_samples)
+                     for s in order_seeds))
   return np.concatenate(idx), np.concatenate(has)
 
 
@@ -348,27 +332,6 @@ def _first_in_prefix(points: np.ndarray, centers: np.ndarray, radius: float,
   return idx, has
 
 
-def _dense_first_in_order(model: Model, points: np.ndarray, keypoints: np.ndarray,
-                          order_seed) -> tuple[np.ndarray, np.ndarray]:
-  """As `_first_in_order`, by `grouping.ball_query` in JAX on the shuffled cloud."""
-  perm = _permutation(len(points), order_seed)
-  size = padding.bucket(len(points), 1024)
-  padded = np.zeros((size, 3), np.float32)
-  padded[:len(points)] = points[perm]
-  valid = jnp.asarray(np.arange(size) < len(points))
-  idx, has = [], []
-  for start in range(0, len(keypoints), DENSE_CHUNK):
-    ctr = np.zeros((DENSE_CHUNK, 3), np.float32)
-    part = keypoints[start:start + DENSE_CHUNK]
-    ctr[:len(part)] = part
-    i, h = _dense_neighbourhoods(jnp.asarray(padded), valid, jnp.asarray(ctr),
-                                 radius=model.radius, num_samples=model.num_samples)
-    idx.append(np.asarray(i)[:len(part)])
-    has.append(np.asarray(h)[:len(part)])
-  idx, has = np.concatenate(idx), np.concatenate(has)
-  return np.where(has[:, None], perm[idx], 0), has
-
-
 def _mean_over_draws(descriptors: np.ndarray, draws: int) -> np.ndarray:
   """descriptors [draws * K, D], draw-major -> [K, D]: the L2-normalised sum over draws
   (the one draw itself when draws=1)."""
@@ -440,8 +403,8 @@ def describe_clusters(model: Model, clouds, centers: np.ndarray | None = None, c
   return _mean_over_draws(descriptors, len(order_seeds))
 
 
-def detect_at(model: Model, points: np.ndarray, centers: np.ndarray, search: str = 'kdtree',
-              chunk: int = 2048, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def detect_at(model: Model, points: np.ndarray, centers: np.ndarray, chunk: int = 2048,
+              seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
   """The detector at given cluster centers: points [N, 3] metres (the search surface),
   centers [K, 3] metres -> attention [K] (>= 0) and orientation [K] (radians about z)."""
   if not model.net.use_orientation:
@@ -449,14 +412,13 @@ def detect_at(model: Model, points: np.ndarray, centers: np.ndarray, search: str
                      'model.use_orientation=False (3DFeat-Net\'s descriptor pre-training)')
   points = check_cloud(points)
   centers = check_cloud(centers, 'centers')
-  idx, has = _neighbourhoods(model, points, centers, search, [seed])
+  idx, has = _neighbourhoods(model, points, centers, [seed])
   return _run_groups(model, points[idx], centers, has, chunk, 'detect')
 
 
-def attention(model: Model, points: np.ndarray, search: str = 'kdtree', chunk: int = 2048,
-              seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def attention(model: Model, points: np.ndarray, chunk: int = 2048, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
   """Attention [N] and orientation [N] (radians) with every point as a cluster center."""
-  return detect_at(model, points, points, search, chunk, seed)
+  return detect_at(model, points, points, chunk, seed)
 
 
 def non_max_suppression(points: np.ndarray, scores: np.ndarray, radius: float = 0.5,
@@ -474,9 +436,8 @@ def non_max_suppression(points: np.ndarray, scores: np.ndarray, radius: float = 
 
 
 def detect(model: Model, points: np.ndarray, nms_radius: float = 0.5, min_ratio: float = 0.01,
-           max_keypoints: int = 1024, search: str = 'kdtree',
-           chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+           max_keypoints: int = 1024, chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
   """Attention keypoints: indices [K] into points (strongest first) and attention [N]."""
-  att, _ = attention(model, points, search, chunk)
+  att, _ = attention(model, points, chunk)
   return non_max_suppression(np.asarray(points, np.float32), att, nms_radius, min_ratio,
                              max_keypoints), att

@@ -1,4 +1,5 @@
-"""Inference API: both neighbourhood paths agree, size buckets, NMS, checkpoints."""
+"""Inference API: neighbourhoods as the ball query finds them, one compiled shape, NMS,
+checkpoints."""
 
 import dataclasses
 
@@ -35,7 +36,7 @@ def test_kdtree_neighbourhoods_equal_ball_query(model):
   pts = rng.uniform(-3, 3, (2000, 3)).astype(np.float32)
   centers = np.concatenate([pts[:50], rng.uniform(-3, 3, (10, 3)), [[100.0, 0, 0]]]).astype(np.float32)
   ball = dataclasses.replace(model, radius=1.0, num_samples=32)
-  idx, has = inference._neighbourhoods(ball, pts, centers, 'kdtree', [0])
+  idx, has = inference._neighbourhoods(ball, pts, centers, [0])
   perm = inference._permutation(len(pts), 0)
   ref_idx, ref_has = grouping.ball_query(pts[perm], centers, 1.0, 32)
   np.testing.assert_array_equal(has, np.asarray(ref_has))
@@ -43,37 +44,30 @@ def test_kdtree_neighbourhoods_equal_ball_query(model):
   assert not has[-1]
 
 
-def test_kdtree_and_dense_paths_give_identical_results(model):
+def test_descriptors_are_unit_vectors_and_attention_covers_every_point(model):
   rng = np.random.default_rng(1)
   pts = _cloud(rng, 3000)
   kp = pts[rng.choice(len(pts), 100, replace=False)]
-  a = inference.describe(model, pts, kp, search='kdtree', chunk=64)
-  b = inference.describe(model, pts, kp, search='dense', chunk=64)
+  a = inference.describe(model, pts, kp, chunk=64)
   assert a.shape == (100, 32)
   np.testing.assert_allclose(np.linalg.norm(a, axis=1), 1.0, atol=1e-5)
-  np.testing.assert_array_equal(a, b)
-  att_a, ori_a = inference.attention(model, pts, search='kdtree', chunk=512)
-  att_b, ori_b = inference.attention(model, pts, search='dense', chunk=512)
-  np.testing.assert_array_equal(att_a, att_b)
-  np.testing.assert_array_equal(ori_a, ori_b)
-  assert att_a.shape == (3000,) and np.all(att_a >= 0)
+  att, ori = inference.attention(model, pts, chunk=512)
+  assert att.shape == ori.shape == (3000,) and np.all(att >= 0)
+  # The attention at every point is the detector at those points as centres.
+  at, ot = inference.detect_at(model, pts, pts[:10], chunk=512)
+  np.testing.assert_allclose(at, att[:10], rtol=1e-5, atol=1e-6)
+  np.testing.assert_allclose(ot, ori[:10], atol=1e-5)
 
 
 def test_stream_of_clouds_compiles_the_network_once(model):
   rng = np.random.default_rng(2)
   inference.describe(model, _cloud(rng, 1500), _cloud(rng, 40), chunk=64)
-  inference.describe(model, _cloud(rng, 1500), _cloud(rng, 40), chunk=64, search='dense')
   network_shapes = inference._network_kernel()._cache_size()
-  dense_shapes = inference._dense_neighbourhoods._cache_size()
-  for n, k in [(1100, 10), (1800, 64), (2000, 100), (1300, 3)]:   # all in the 2048 bucket
-    out = inference.describe(model, _cloud(rng, n), _cloud(rng, k), chunk=64, search='dense')
-    assert out.shape == (k, 32)
-  assert inference._dense_neighbourhoods._cache_size() == dense_shapes
-  inference.describe(model, _cloud(rng, 5000), _cloud(rng, 10), chunk=64, search='dense')
-  assert inference._dense_neighbourhoods._cache_size() == dense_shapes + 1   # 8192 bucket
   # The network sees host-gathered clusters: one shape whatever the cloud size, for
   # descriptors and attention alike.
-  inference.describe(model, _cloud(rng, 9000), _cloud(rng, 130), chunk=64)
+  for n, k in [(1100, 10), (1800, 64), (5000, 100), (9000, 130)]:
+    out = inference.describe(model, _cloud(rng, n), _cloud(rng, k), chunk=64)
+    assert out.shape == (k, 32)
   assert inference._network_kernel()._cache_size() == network_shapes
   inference.attention(model, _cloud(rng, 1500), chunk=256)
   detect_shapes = inference._network_kernel()._cache_size()
@@ -143,9 +137,6 @@ def test_bad_clouds_are_refused(model):
   bad[5] = np.nan
   with pytest.raises(ValueError, match='1 points have NaN/Inf'):
     inference.attention(model, bad)
-  with pytest.raises(ValueError, match='search must be one of'):
-    inference.describe(model, _cloud(np.random.default_rng(4), 100), np.zeros((1, 3)),
-                       search='octree')
 
 
 @pytest.mark.slow

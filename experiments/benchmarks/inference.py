@@ -1,5 +1,6 @@
-r"""Inference speed on a 16,384-point cloud: learned descriptors and attention (both
-neighbourhood paths) beside Open3D FPFH on the same keypoints.
+r"""Inference speed on a 16,384-point cloud: learned descriptors (host KD-tree
+neighbourhoods, and `describe_fn`, the pure JAX function) and attention beside Open3D
+FPFH on the same keypoints.
 
     python -m experiments.benchmarks.inference [--cloud=../shared/data/example/oxford_270.bin]
 
@@ -58,15 +59,14 @@ def main(argv):
   pts = _cloud()
   kp_idx = np.random.default_rng(1).choice(len(pts), FLAGS.keypoints, replace=False)
   kp = pts[kp_idx]
+  pure_jax = jax.jit(inference.describe_fn(model))
   rows = [
       (f'learned descriptors, {FLAGS.keypoints} keypoints, KD-tree neighbourhoods',
-       _time(lambda: inference.describe(model, pts, kp, search='kdtree'))),
-      (f'learned descriptors, {FLAGS.keypoints} keypoints, dense JAX ball query',
-       _time(lambda: inference.describe(model, pts, kp, search='dense'))),
+       _time(lambda: inference.describe(model, pts, kp))),
+      (f'learned descriptors, {FLAGS.keypoints} keypoints, `describe_fn` jitted (dense ball query)',
+       _time(lambda: pure_jax(pts, kp).block_until_ready())),
       (f'attention for all {len(pts):,} points, KD-tree',
-       _time(lambda: inference.attention(model, pts, search='kdtree'))),
-      (f'attention for all {len(pts):,} points, dense JAX ball query',
-       _time(lambda: inference.attention(model, pts, search='dense'))),
+       _time(lambda: inference.attention(model, pts))),
       (f'Open3D FPFH, same {FLAGS.keypoints} keypoints, 4 m, every neighbour (the default)',
        _time(lambda: features.fpfh(pts, kp_idx))),
       (f'Open3D FPFH, same {FLAGS.keypoints} keypoints, 4 m, neighbour cap 1000',

@@ -1,4 +1,4 @@
-r"""RANSAC speed: this project's JAX RANSAC vs Open3D's, on the same correspondences.
+r"""RANSAC speed: this project's batched RANSAC vs Open3D's, on the same correspondences.
 
     python -m experiments.benchmarks.ransac --dataset=data_cache/synthetic_small/test_kitti \
         [--max_pairs=60]
@@ -11,7 +11,7 @@ neighbour, per synthetic test pair. Both estimators get the same 1 m inlier
 threshold, 99 % confidence and 10,000-trial cap; Open3D's
 `registration_ransac_based_on_correspondence` runs multi-threaded. Prints the
 median time per pair and the success rate against the ground truth, plus the
-sequential numpy reference (same samples and trial count as the JAX version).
+sequential numpy reference (same samples and trial count as the batched one).
 
 `--estimator=upright`: 1,024 farthest-point keypoints + FPFH (cap 200) per cloud, then
 `pair_stages.estimate` (matching and upright RANSAC) with uniform and with compatible samples;
@@ -88,8 +88,7 @@ def main(argv):
   if FLAGS.estimator == 'upright':
     return upright_samplings(pairs)
   cache = {}
-  rows = {'this project (auto: numpy batches here)': [], 'this project, JAX kernel': [],
-          'Open3D': [], 'sequential numpy (reference)': []}
+  rows = {'this project (batched)': [], 'Open3D': [], 'sequential numpy (reference)': []}
   for n, pair in enumerate(tqdm.tqdm(pairs, desc='pairs', unit='pair')):
     for path in (pair.cloud1, pair.cloud2):
       if path not in cache:
@@ -100,15 +99,11 @@ def main(argv):
     xyz1, xyz2 = f1.xyz.astype(np.float64), f2.xyz[nn].astype(np.float64)
     samples = ransac.draw_minimal_samples(np.random.default_rng(n), xyz2, 10_001)
     methods = {
-        'this project (auto: numpy batches here)':
-            lambda: ransac.ransac(xyz1, xyz2, samples).transform,
-        'this project, JAX kernel':
-            lambda: ransac.ransac(xyz1, xyz2, samples, backend='jax').transform,
+        'this project (batched)': lambda: ransac.ransac(xyz1, xyz2, samples).transform,
         'Open3D': lambda: open3d_ransac(xyz1, xyz2, 10_000, 0.99, 1.0, n),
         'sequential numpy (reference)':
             lambda: ransac.ransac_sequential(xyz1, xyz2, samples).transform,
     }
-    methods['this project, JAX kernel']()   # compile outside the timing
     for name, fn in methods.items():
       times = []
       for _ in range(FLAGS.repeats if name != 'sequential numpy (reference)' else 1):

@@ -162,8 +162,7 @@ def compute_keypoints(points: np.ndarray, method: str, model=None, seed: int = 0
 
 
 def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: str,
-                        model=None, search: str = 'kdtree',
-                        fpfh_max_nn: int = features.FPFH_MAX_NN) -> np.ndarray:
+                        model=None, fpfh_max_nn: int = features.FPFH_MAX_NN) -> np.ndarray:
   """[K, D] descriptors at points[keypoint_idx]: FPFH (docs/method.md §4) or learned."""
   points = check_cloud(points)
   keypoint_idx = np.asarray(keypoint_idx)
@@ -177,7 +176,7 @@ def compute_descriptors(points: np.ndarray, keypoint_idx: np.ndarray, method: st
   if method == 'learned':
     if model is None:
       raise ValueError('learned descriptors need a model (--checkpoint)')
-    return inference.describe(model, points, points[keypoint_idx], search=search)
+    return inference.describe(model, points, points[keypoint_idx])
   raise ValueError(f'descriptor must be one of {options_lib.DESCRIPTORS}, got {method!r}')
 
 

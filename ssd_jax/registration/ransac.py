@@ -9,27 +9,18 @@ hypothesis is then refit on all its inliers.
 
 Both implementations consume the same pre-drawn sequence of minimal samples
 (`draw_minimal_samples`), so they agree trial for trial:
-  * `ransac_sequential`: the straightforward loop, numpy (the reference);
+  * `ransac_sequential`: the straightforward loop (the reference);
   * `ransac`: scores hypotheses in batches and replays the sequential stopping rule
     over their inlier counts, so the stopping point and the reported trial count are
     the sequential ones. Batches start small (32) and double up to `batch_size`, so a
     pair that stops after a few hundred trials scores a few hundred, not thousands.
-    Up to `NUMPY_MAX_CORRESPONDENCES` matches (every ISS keypoint set here) a batch
-    is scored in numpy, with no compilation; beyond, in one jitted JAX call
-    (padded to power-of-two buckets so that many pairs reuse a few kernels).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-
-from ssd_jax import cf
-from ssd_jax.infra import padding
 
 
 @dataclasses.dataclass(frozen=True)
@@ -145,35 +136,10 @@ def _sample_inliers(xyz1: np.ndarray, xyz2: np.ndarray, sample: np.ndarray,
   return np.linalg.norm(xyz2 @ model[:3, :3].T + model[:3, 3] - xyz1, axis=1) < threshold
 
 
-def _pair_fit(src: jax.Array, dst: jax.Array, weight: jax.Array):
-  """Weighted Kabsch of paired points src [C, 3] -> dst [C, 3], weight [C] >= 0."""
-  w = jnp.diag(weight / jnp.maximum(jnp.sum(weight), 1e-12))
-  return cf.weighted_kabsch(src, dst, w)
-
-
-@functools.partial(jax.jit, static_argnames=('threshold',))
-def _inlier_counts(xyz1, xyz2, valid, samples, *, threshold):
-  """Inlier count of each hypothesis: samples [B, 3] -> [B] int32. xyz [C, 3], valid [C]."""
-  def one(s):
-    r, t = _pair_fit(xyz2[s], xyz1[s], jnp.ones(3))
-    d2 = jnp.sum((xyz2 @ r.T + t - xyz1) ** 2, -1)
-    return jnp.sum((d2 < threshold * threshold) & valid)
-  return jax.vmap(one)(samples)
-
-
-@functools.partial(jax.jit, static_argnames=('threshold',))
-def _refit(xyz1, xyz2, valid, sample, *, threshold):
-  """Inliers of one hypothesis and the Kabsch refit on them."""
-  r, t = _pair_fit(xyz2[sample], xyz1[sample], jnp.ones(3))
-  inliers = (jnp.sum((xyz2 @ r.T + t - xyz1) ** 2, -1) < threshold * threshold) & valid
-  r, t = _pair_fit(xyz2, xyz1, inliers.astype(xyz1.dtype))
-  return r, t, inliers
-
-
-
-# Batched numpy scoring holds [batch, C, 3] float64 residuals: 12 MB at 512 x 1,024.
-NUMPY_MAX_CORRESPONDENCES = 1024
 FIRST_BATCH = 32
+# A batch's [batch, C] float64 residual planes hold at most this many entries (4 MB):
+# thousands of ISS matches score in smaller batches.
+MAX_BATCH_ENTRIES = 512 * 1024
 
 
 def _numpy_scorer(xyz1: np.ndarray, xyz2: np.ndarray, threshold: float):
@@ -199,65 +165,33 @@ def _numpy_scorer(xyz1: np.ndarray, xyz2: np.ndarray, threshold: float):
 
 def ransac(xyz1: np.ndarray, xyz2: np.ndarray, samples: np.ndarray,
            inlier_threshold: float = 1.0, confidence: float = 0.99, max_trials: int = 10_000,
-           min_trials: int = 10, batch_size: int = 512, x64: bool = True,
-           backend: str = 'auto') -> RansacResult:
-  """`ransac_sequential`'s result, scoring hypotheses in batches.
-
-  Batches grow 32, 64, ... up to `batch_size`, and trials after the one at which the
-  sequential rule stops are never scored. `backend`: 'numpy' (batched, no
-  compilation), 'jax' (one jitted call per batch; correspondences padded to a
-  power-of-two bucket and masked) or 'auto' (numpy up to NUMPY_MAX_CORRESPONDENCES
-  matches). With `x64` the JAX kernels run in float64, like the reference: in float32
-  a residual within ~1e-5 m of the threshold may count differently and change the
-  trial count.
-  """
+           min_trials: int = 10, batch_size: int = 512) -> RansacResult:
+  """`ransac_sequential`'s result, scoring hypotheses in batches: they grow 32, 64, ...
+  up to `batch_size` (fewer where C correspondences would pass MAX_BATCH_ENTRIES), and
+  trials after the one at which the sequential rule stops are never scored."""
   _check_samples(samples, max_trials)
-  if backend not in ('auto', 'numpy', 'jax'):
-    raise ValueError(f"backend must be 'auto', 'numpy' or 'jax', got {backend!r}")
-  if backend == 'numpy' or (backend == 'auto' and len(xyz1) <= NUMPY_MAX_CORRESPONDENCES):
-    trials, best_trial, best_score, _ = _replay(
-        _numpy_scorer(xyz1, xyz2, inlier_threshold), samples, len(xyz1), confidence,
-        max_trials, min_trials, batch_size)
-    inliers = _sample_inliers(xyz1, xyz2, samples[best_trial], inlier_threshold)
-    transform = kabsch(xyz2[inliers], xyz1[inliers]) if best_score >= 3 else np.eye(4)
-    return RansacResult(transform, inliers, trials)
-  with jax.enable_x64(x64):
-    dtype = np.float64 if x64 else np.float32
-    n, size = len(xyz1), padding.bucket(len(xyz1), 256)
-    pad = lambda a: jnp.asarray(np.concatenate([a, np.zeros((size - n, 3))]).astype(dtype))
-    x1, x2, valid = pad(xyz1), pad(xyz2), jnp.asarray(np.arange(size) < n)
-    score = lambda batch: np.asarray(_inlier_counts(   # the host reads each batch's counts:
-        x1, x2, valid, jnp.asarray(batch, jnp.int32),  # the stopping rule needs them
-        threshold=float(inlier_threshold)))
-    trials, best_trial, best_score, _ = _replay(score, samples, n, confidence, max_trials,
-                                                min_trials, batch_size, fixed_shape=True)
-    r, t, inliers = _refit(x1, x2, valid, jnp.asarray(samples[best_trial], jnp.int32),
-                           threshold=float(inlier_threshold))
-  inliers = np.asarray(inliers)[:len(xyz1)]
-  if best_score < 3:
-    return RansacResult(np.eye(4), inliers, trials)
-  transform = np.eye(4)
-  transform[:3, :3], transform[:3, 3] = np.asarray(r, np.float64), np.asarray(t, np.float64)
+  batch_size = max(1, min(batch_size, MAX_BATCH_ENTRIES // max(len(xyz1), 1)))
+  trials, best_trial, best_score, _ = _replay(
+      _numpy_scorer(xyz1, xyz2, inlier_threshold), samples, len(xyz1), confidence,
+      max_trials, min_trials, batch_size)
+  inliers = _sample_inliers(xyz1, xyz2, samples[best_trial], inlier_threshold)
+  transform = kabsch(xyz2[inliers], xyz1[inliers]) if best_score >= 3 else np.eye(4)
   return RansacResult(transform, inliers, trials)
 
 
 def _replay(score, samples, n, confidence, max_trials, min_trials, batch_size,
-            fixed_shape: bool = False, pairs: int = 0) -> tuple[int, int, int, np.ndarray]:
+            pairs: int = 0) -> tuple[int, int, int, np.ndarray]:
   """The sequential stopping rule over batches of inlier counts: the one RANSAC loop of
   both motion models. score(samples [B, s]) -> inlier counts [B] of the hypotheses of a
   batch of samples [T, s] (s = 3 rigid, 2 upright: the rule's N uses w^s, or the
   inliers' share of `pairs` compatible pairs, `_adaptive_trials`). Batches grow
-  FIRST_BATCH, 2x, ... up to `batch_size`; with `fixed_shape` the last one repeats its
-  final sample to full size (one jitted shape; the repeats are not replayed). The loop
-  also ends with the samples.
+  FIRST_BATCH, 2x, ... up to `batch_size`. The loop also ends with the samples.
   -> (trials, index of the best trial, its inlier count, the counts of the trials [trials])."""
   sample_size = samples.shape[1]
   best_score, best_trial, trials, needed = -1, 0, 0, float(min_trials)
   size, scored = min(FIRST_BATCH, batch_size), []
   while needed > trials and trials <= max_trials and trials < len(samples):
     batch = samples[trials: min(trials + size, max_trials + 1)]
-    if fixed_shape and len(batch) < size:
-      batch = np.concatenate([batch, np.repeat(batch[-1:], size - len(batch), 0)])
     scores = np.asarray(score(batch))
     scored.append(scores)
     for s in scores.tolist():
