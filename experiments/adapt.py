@@ -7,7 +7,7 @@ fine-tune on them, then export the model with a model card.
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin --descriptor=learned \
         --checkpoint=exports/my_sensor
 
-The scans (.bin/.npy/.ply/.pcd/.las/.laz, one sweep each, centred on the sensor, z up)
+The scans (.bin/.npy/.ply/.pcd/.las/.laz/.xyz/.pts/.vtk, one sweep each, centred on the sensor, z up)
 are read in name order as a drive. `--pairs=auto` first mines pairs of them
 (`experiments.mine`: the classical registration, kept where the verdict trusts its poses
 and they close loops; no pose is read; a long drive thinned to `mining.max_scans` scans)

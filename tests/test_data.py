@@ -34,6 +34,39 @@ def test_plain_xyz_npy_ply_pcd(tmp_path):
     np.testing.assert_allclose(io.read_cloud(tmp_path / f'a{suffix}'), pts, atol=1e-6)
 
 
+def test_text_and_vtk_clouds(tmp_path):
+  """Text clouds whatever their separator, header or extra columns, and legacy VTK in
+  ASCII and binary, read to the precision they were written with; broken ones named."""
+  rng = np.random.default_rng(1)
+  pts = rng.normal(0, 10, (200, 3))
+  np.savetxt(tmp_path / 'a.xyz', pts)
+  np.savetxt(tmp_path / 'b.csv', np.c_[rng.random(200), pts], delimiter=',',
+             header='intensity,X,Y,Z', comments='')   # x, y, z named after another column
+  (tmp_path / 'c.pts').write_text('200\n' + '\n'.join(
+      ' '.join(f'{v:.9f}' for v in row) + ' 7 0.5' for row in pts))
+  (tmp_path / 'd.txt').write_text('\n'.join(';'.join(repr(float(v)) for v in row) for row in pts))
+  head = '# vtk DataFile Version 3.0\nscan\n{}\nDATASET POLYDATA\nPOINTS 200 {}\n'
+  (tmp_path / 'e.vtk').write_text(head.format('ASCII', 'double') + '\n'.join(
+      ' '.join(repr(float(v)) for v in row) for row in pts) + '\nVERTICES 1 201\n200 ' + ' 0' * 200)
+  (tmp_path / 'f.vtk').write_bytes(head.format('BINARY', 'float').encode()
+                                   + pts.astype('>f4').tobytes() + b'\n')
+  for name, atol in (('a.xyz', 1e-12), ('b.csv', 1e-12), ('c.pts', 1e-8), ('d.txt', 0),
+                     ('e.vtk', 0), ('f.vtk', 1e-5)):
+    np.testing.assert_allclose(io.read_cloud(tmp_path / name), pts, rtol=1e-7, atol=atol,
+                               err_msg=name)
+  (tmp_path / 'cut.vtk').write_bytes(head.format('BINARY', 'float').encode() + b'\0' * 100)
+  (tmp_path / 'words.txt').write_text('poses of the drive\nnone\n')
+  (tmp_path / 'short.csv').write_text('x,y,z\n1,2,3\n4,5\n')
+  for name, message in (('cut.vtk', 'truncated: 200 points need 2400 bytes'),
+                        ('words.txt', 'no line of three or more numbers'),
+                        ('short.csv', 'not a table of numbers after line 2')):
+    with pytest.raises(io.CloudFileError, match=message):
+      io.read_cloud(tmp_path / name)
+  # A folder of scans lists the clouds, not its .txt and .csv (indices, poses).
+  assert [p.name for p in io.list_clouds(tmp_path)] == ['a.xyz', 'c.pts', 'cut.vtk', 'e.vtk',
+                                                         'f.vtk']
+
+
 @pytest.mark.parametrize('content, fmt, message', [
     (b'', 'auto', 'file is empty'),
     (b'\0' * 10, 'auto', 'not a whole number of float32 values'),

@@ -6,7 +6,9 @@ Supported:
     layouts in float64 (`xyzn64`, `xyzi64`, `xyz64`); detected from the bytes
     (`detect_bin_format`, which refuses rather than guesses) or named;
   * `.npy` arrays [N, >=3];
-  * `.ply` and `.pcd` through Open3D;
+  * `.ply` and `.pcd` through Open3D; `.las` / `.laz` through laspy;
+  * text, one point a line (`.xyz`, `.pts`, `.txt`, `.csv`: `read_text`), and legacy
+    VTK point sets (`.vtk`, ASCII or binary: `read_vtk`);
   * the 3DFeat-Net Oxford training index `train.txt`
     (`file.bin | positive indices | non-negative indices`, 0-based).
 """
@@ -14,8 +16,10 @@ Supported:
 from __future__ import annotations
 
 import dataclasses
+import io as text_io
 import os
 from pathlib import Path
+import re
 
 import numpy as np
 
@@ -31,7 +35,10 @@ BIN_FORMATS = {
 # Auto-detection prefers the layout whose extra columns carry evidence (normals, then
 # an intensity) over plain xyz, which any byte count divisible by 12 also fits.
 _PREFERENCE = ('xyzn', 'xyzn64', 'xyzi', 'xyzi64', 'xyz', 'xyz64')
-CLOUD_SUFFIXES = ('.bin', '.npy', '.ply', '.pcd', '.las', '.laz')
+# What a folder of scans is listed by (`list_clouds`); `.txt` and `.csv` files are read
+# when named (a folder's .txt is more often an index or poses).
+CLOUD_SUFFIXES = ('.bin', '.npy', '.ply', '.pcd', '.las', '.laz', '.xyz', '.pts', '.vtk')
+TEXT_SUFFIXES = ('.xyz', '.pts', '.txt', '.csv')
 # Metres. Beyond it a value is read garbage, not a coordinate (UTM northings are ~1e7).
 MAX_COORDINATE = 1e8
 _DETECT_ROWS = 8192
@@ -220,8 +227,9 @@ def estimated_points(path: Path) -> int:
     except Exception:  # pylint: disable=broad-except  (the reader names a bad file)
       return 0
   # .bin: KITTI's 16-byte xyzi rows, the common case (xyz rows: 25 % more points than this,
-  # within BYTES_PER_POINT's margin); .las: its smallest point record; .ply/.pcd: xyz float32.
-  return size // {'.bin': 16, '.las': 20}.get(suffix, 12)
+  # within BYTES_PER_POINT's margin); .las: its smallest point record; text: three short
+  # numbers; .ply/.pcd/.vtk: xyz float32.
+  return size // {'.bin': 16, '.las': 20, **dict.fromkeys(TEXT_SUFFIXES, 24)}.get(suffix, 12)
 
 
 def check_memory(path: Path) -> None:
@@ -268,7 +276,68 @@ def read_cloud(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
     return pts
   if suffix in ('.las', '.laz'):
     return _read_las(path)
-  raise CloudFileError(f'{path}: unsupported file type {suffix!r}; supported: {CLOUD_SUFFIXES}')
+  if suffix in TEXT_SUFFIXES:
+    return read_text(path)
+  if suffix == '.vtk':
+    return read_vtk(path)
+  raise CloudFileError(f'{path}: unsupported file type {suffix!r}; supported: '
+                       f'{CLOUD_SUFFIXES + TEXT_SUFFIXES[2:]}')
+
+
+_NUMBER = re.compile(r'^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^[-+]?(nan|inf)$', re.I)
+
+
+def read_text(path: str | os.PathLike) -> np.ndarray:
+  """xyz [N, 3] float64 of a text cloud, one point a line, numbers split by commas,
+  semicolons, spaces or tabs: the columns a header line names x, y, z (any case, e.g.
+  `x,y,z,intensity`), else the first three. Lines before the first of three or more
+  numbers (headers, a `.pts` point count) are skipped."""
+  path = Path(path)
+  try:
+    lines = path.read_text().splitlines()
+  except UnicodeDecodeError:
+    raise CloudFileError(f'{path}: not a text file') from None
+  split = lambda line: [f for f in re.split(r'[,;\s]+', line.strip()) if f]
+  start = next((k for k, line in enumerate(lines)
+                if len(split(line)) >= 3 and all(_NUMBER.match(f) for f in split(line))), None)
+  if start is None:
+    raise CloudFileError(f'{path}: no line of three or more numbers (x y z)')
+  names = [f.strip('"\'').lower() for f in split(lines[start - 1])] if start else []
+  columns = tuple(names.index(a) for a in 'xyz') if set('xyz') <= set(names) else (0, 1, 2)
+  delimiter = next((d for d in ',;' if d in lines[start]), None)
+  try:
+    pts = np.loadtxt(text_io.StringIO('\n'.join(lines[start:])), delimiter=delimiter,
+                     usecols=columns, ndmin=2, dtype=np.float64)
+  except ValueError as e:
+    raise CloudFileError(f'{path}: not a table of numbers after line {start + 1} ({e})') from None
+  return pts
+
+
+def read_vtk(path: str | os.PathLike) -> np.ndarray:
+  """xyz [N, 3] float64 of a legacy VTK file's POINTS (ASCII or big-endian BINARY)."""
+  path = Path(path)
+  data = path.read_bytes()
+  found = re.search(rb'^POINTS\s+(\d+)\s+(\w+)[^\n]*\n', data, re.M)
+  if not data.startswith(b'# vtk') or found is None:
+    raise CloudFileError(f'{path}: not a legacy VTK file with POINTS')
+  n, kind = int(found.group(1)), found.group(2).decode().lower()
+  width = {'float': 4, 'double': 8}.get(kind)
+  if width is None:
+    raise CloudFileError(f'{path}: VTK POINTS of type {kind!r}; float or double expected')
+  body = data[found.end():]
+  if re.search(rb'^BINARY\s*$', data[:found.start()], re.M):
+    if len(body) < 3 * n * width:
+      raise CloudFileError(f'{path}: truncated: {n} points need {3 * n * width} bytes, '
+                           f'{len(body)} follow POINTS')
+    return np.frombuffer(body, f'>f{width}', 3 * n).astype(np.float64).reshape(n, 3)
+  values = body.split(maxsplit=3 * n)[:3 * n]
+  try:
+    pts = np.array(values, dtype=np.float64)
+  except ValueError:
+    raise CloudFileError(f'{path}: the {n} VTK POINTS are not all numbers') from None
+  if len(pts) < 3 * n:
+    raise CloudFileError(f'{path}: truncated: {n} points announced, {len(pts) // 3} found')
+  return pts.reshape(n, 3)
 
 
 def _read_las(path: Path) -> np.ndarray:
