@@ -10,7 +10,8 @@ fine-tune on them, then export the model with a model card.
 The scans (.bin/.npy/.ply/.pcd/.las/.laz/.xyz/.pts/.vtk, one sweep each, centred on the sensor, z up)
 are read in name order as a drive. `--pairs=auto` first mines pairs of them
 (`experiments.mine`: the classical registration, kept where the verdict trusts its poses
-and they close loops; no pose is read; a long drive thinned to `mining.max_scans` scans)
+and they close loops; no pose is read; a long drive thinned to `mining.max_scans` scans,
+every k-th, k halved while its teacher cannot close loops of three: `mining.stride_for`)
 into OUT/mined_pairs.csv, then trains the paper's objective with half of each batch's
 second branches a real second scan moved by the mined transform (two-view training,
 `datasets.MinedPairDataset`) and half the paper's turned copy. Then it widens, as EYOC
@@ -49,7 +50,8 @@ from ssd_jax.adaptation import keypoint_choice, mining
 FLAGS = flags.FLAGS
 flags.DEFINE_string('scans', None, 'Folder (or index .txt) of unlabeled scans of the sensor.')
 flags.DEFINE_string('out', None, 'Output folder: the exported model, its card, and run/.')
-flags.DEFINE_string('init', 'ours', 'Model to start from: a shipped name, export or run.')
+flags.DEFINE_string('init', pretrained.DEFAULT, 'Model to start from: a shipped name, export '
+                    'or run.')
 flags.DEFINE_integer('steps', None, 'Training steps (default: the config\'s).')
 flags.DEFINE_string('pairs', 'auto', 'auto: mine pairs of the scans first (OUT/mined_pairs.csv); '
                     "none: the paper's single-scan objective alone; or a miner's CSV.")
@@ -184,7 +186,9 @@ def main(argv):
   try:
     scans = [str(p) for p in io.list_clouds(FLAGS.scans)]
     num_scans = len(scans)
-    mined = mining.spread(scans, config.mining.max_scans)
+    stride = (mining.stride_for(scans, functools.partial(clean.read_metres, fmt='auto'),
+                                config.mining.max_scans) if FLAGS.pairs == 'auto' else None)
+    mined = mining.spread(scans, config.mining.max_scans, stride)
     start = time.perf_counter()
     config.data.pairs = _pairs(mined)
     objective = (PAIRS_OBJECTIVE.format(rate=config.data.pairs_rate) if config.data.pairs

@@ -145,11 +145,35 @@ def test_workers_find_the_same_pairs_and_a_rerun_registers_none(drive, monkeypat
   assert calls == []
 
 
+def test_a_drive_of_far_apart_keyframes_is_mined_at_a_shorter_stride(monkeypatch):
+  """A teacher that registers scans up to 6 apart: every 4th of 457 scans (120 at most)
+  leaves loop sides 8 apart, which it cannot register, so the stride halves to 2; one that
+  registers 8 apart keeps 4. Each try probes MIN_PROBE pairs two strides apart."""
+  scans = [f's{k:03d}' for k in range(457)]
+  probed = []
+
+  def teacher(reach):
+    def register_many(pairs, read, options, say):
+      probed.append([int(b[1:]) - int(a[1:]) for a, b in pairs])
+      return [(a, b, int(b[1:]) - int(a[1:]) <= reach) for a, b in pairs]
+    return register_many
+  judged = lambda result, gap: mined_pairs.MinedPair(result[0], result[1], gap, np.eye(4),
+                                                     0.5, result[2])
+  monkeypatch.setattr(mining, '_judged', judged)
+  monkeypatch.setattr(mining.pipeline, 'register_many', teacher(6))
+  assert mining.stride_for(scans, None, 120, say=lambda line: None) == 2
+  assert probed == [[8] * mining.MIN_PROBE, [4] * mining.MIN_PROBE]
+  monkeypatch.setattr(mining.pipeline, 'register_many', teacher(8))
+  assert mining.stride_for(scans, None, 120, say=lambda line: None) == 4
+
+
 def test_a_long_drive_is_thinned_and_widening_doubles_the_reached_gap():
   scans = [f's{k:03d}' for k in range(457)]
   thinned = mining.spread(scans, 120)
   assert len(thinned) == 115 and thinned[:3] == ['s000', 's004', 's008']
   assert mining.spread(scans[:50], 120) == scans[:50]
+  # At a shorter stride, the middle 120 of the drive's every other scan.
+  assert mining.spread(scans, 120, 2) == scans[108:348:2]
   with pytest.raises(errors.UserError, match='max_scans must be 3 or more'):
     mining.spread(scans, 2)
   poses = [_pose(0, 2.0 * k, 0) for k in range(9)]

@@ -21,7 +21,8 @@ Widening (EYOC's curriculum): a model trained on the kept pairs registers farthe
 than its teacher did; `widened_gaps` names the next gaps, `mine(model=...)` registers them
 with it (the same gate), and `mine_to_file` gates the pairs of every round together, so
 a far pair is also kept through loops closed by nearer labels of the round before.
-`spread` thins a long drive to the scans mined (the cost is a pair's registration).
+`spread` thins a long drive to the scans mined (the cost is a pair's registration), at the
+stride `stride_for` finds its teacher closing loops at.
 
 `label_errors` measures the kept labels against ground-truth poses where a user has them
 (the miner never reads them).
@@ -74,12 +75,42 @@ def teacher_options() -> options_lib.Options:
   return options_lib.Options(descriptor='fpfh')
 
 
-def spread(scans: Sequence[str], max_scans: int) -> list[str]:
-  """Every k-th of `scans` (capture order), k the least that leaves at most `max_scans`:
-  the growing gaps then reach as far in metres for a fraction of the registrations."""
+def least_stride(num_scans: int, max_scans: int) -> int:
+  """The least k for which every k-th of `num_scans` scans is at most `max_scans` of them."""
   if max_scans < 3:
     raise errors.UserError(f'max_scans must be 3 or more (a loop takes three), got {max_scans}')
-  return list(scans)[::-(-len(scans) // max_scans) or 1]
+  return -(-num_scans // max_scans) or 1
+
+
+def spread(scans: Sequence[str], max_scans: int, stride: int | None = None) -> list[str]:
+  """Every `stride`-th of `scans` (capture order; default `least_stride`): the growing gaps
+  then reach as far in metres for a fraction of the registrations. Where that leaves more
+  than `max_scans`, the middle `max_scans` of them, consecutive."""
+  stride = least_stride(len(scans), max_scans) if stride is None else stride
+  every = list(scans)[::stride]
+  start = max(0, (len(every) - max_scans) // 2)
+  return every[start:start + max_scans]
+
+
+def stride_for(scans: Sequence[str], read: Callable[[str], np.ndarray], max_scans: int, *,
+               say: Callable[[str], None] = print) -> int:
+  """The stride to `spread` `scans` at: from `least_stride`, halved while the teacher
+  registers confidently under MIN_YIELD of MIN_PROBE pairs two strides apart, the side
+  that closes a loop of three (a drive of keyframes far apart, where every k-th scan
+  leaves the loops too long to register, is mined at a shorter stride)."""
+  stride = least_stride(len(scans), max_scans)
+  while stride > 1 and len(scans) > 2 * stride:
+    ends = np.linspace(0, len(scans) - 1 - 2 * stride, MIN_PROBE).round().astype(int)
+    probe = [_judged(result, 2 * stride) for result in pipeline.register_many(
+        [(str(scans[i]), str(scans[i + 2 * stride])) for i in ends], read,
+        options=teacher_options(), say=lambda line: None)]
+    share = np.mean([p.confident for p in probe])
+    if share >= MIN_YIELD:
+      break
+    say(f'stride {stride}: {share:.0%} of {len(probe)} probed loop sides confident (< '
+        f'{MIN_YIELD:.0%}): stride {stride // 2}')
+    stride //= 2
+  return stride
 
 
 def widened_gaps(pairs: Sequence[MinedPair], count: int = 2) -> tuple[int, ...]:
