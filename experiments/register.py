@@ -1,7 +1,7 @@
 r"""Register two point clouds: print T_12, the 4 x 4 that maps cloud 2 into cloud 1's frame.
 
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin [--descriptor=learned,fpfh]
-        [--keypoints=auto|iss|learned|random] [--checkpoint=ours|RUN_DIR|EXPORT_DIR] [--icp]
+        [--keypoints=auto|iss|learned|random] [--checkpoint=ours_mined|RUN_DIR|EXPORT_DIR] [--icp]
         [--groundtruth=groundtruths.txt] [--voxel=SIZE] [--verify=K] [--bev=B] [--json=OUT.json]
     python -m experiments.register --pairs=PAIRS.txt --out=DIR      # many pairs, one process
     python -m experiments.register --sequence=SCANS_DIR --out=DIR   # consecutive scans
@@ -55,8 +55,8 @@ flags.DEFINE_integer('bev', DEFAULTS.bev, "Also check the bird's-eye-view search
 flags.DEFINE_list('descriptor', [DEFAULTS.descriptor], 'learned, fpfh; a list runs each.')
 flags.DEFINE_enum('level', DEFAULTS.level, options_lib.LEVELS,
                   'ground: level each tilted scan by its ground first; none: take z as up.')
-flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: ours, or '
-                    'ours_detector for learned keypoints).')
+flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: '
+                    f'{pretrained.DEFAULT}, or ours_detector for learned keypoints).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding the pairs (optional).')
 flags.DEFINE_bool('icp', DEFAULTS.icp, 'Refine with point-to-plane ICP (1 m, then 0.5 m).')
 flags.DEFINE_integer('seed', DEFAULTS.seed, 'RANSAC / random-keypoint seed.')
@@ -140,7 +140,8 @@ def main(argv):
   options = [_options(d) for d in FLAGS.descriptor]
   # The shipped descriptor model's attention is untrained: learned keypoints need the
   # shipped self-supervised detector.
-  name = FLAGS.checkpoint or ('ours_detector' if FLAGS.keypoints == 'learned' else 'ours')
+  name = FLAGS.checkpoint or ('ours_detector' if FLAGS.keypoints == 'learned'
+                              else pretrained.DEFAULT)
   loaded = pretrained.load(name) if any(o.needs_model for o in options) else None
   if batch:
     return _batch(options[0], loaded, name)

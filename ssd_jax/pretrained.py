@@ -9,7 +9,7 @@ An export is a folder with three files:
 
 The shipped ones live in `ssd_jax/weights/<name>/` and are named by `SHIPPED`:
 
-    model = pretrained.load('ours')              # shipped: the best self-supervised model
+    model = pretrained.load(pretrained.DEFAULT)  # shipped: the register command's model
     model = pretrained.load('runs/ours')   # a training run (its latest checkpoint)
     model = pretrained.load('exports/mine')      # an export folder
 """
@@ -40,6 +40,11 @@ SHIPPED = {
     'ours_mined': 'ours fine-tuned on pairs mined from a mixed-sensor drive '
                   '(configs/training/ours_mined.py)',
 }
+# The model the register command describes with, the evaluation's command rows name and
+# `experiments.adapt` starts from, unless told otherwise: of the shipped self-supervised
+# models, the one whose register defaults register the most real-drive pairs
+# (docs/notes/real_drives.md); trained without a label on the project's own simulated drive.
+DEFAULT = 'ours_mined'
 CONFIG_FILE, WEIGHTS_FILE, CARD_FILE = 'config.json', 'weights.msgpack', 'MODEL_CARD.md'
 
 

@@ -39,9 +39,9 @@ def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_pat
          '--config.progress_bar=False']
   run = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
   assert run.returncode == 0, run.stderr[-3000:]
-  assert f'wrote {out}: ours adapted on' in run.stdout
+  assert f'wrote {out}: {pretrained.DEFAULT} adapted on' in run.stdout
   card = (out / 'MODEL_CARD.md').read_text()
-  assert '| base model | `ours` |' in card and '2 steps' in card and 'experiments.adapt' in card
+  assert f'| base model | `{pretrained.DEFAULT}` |' in card and '2 steps' in card and 'experiments.adapt' in card
   # The drive's pairs were mined first and trained on.
   kept = mined_pairs.read_kept(str(out / 'mined_pairs.csv'))
   assert f'| mined pairs | {len(kept)} (`{out / "mined_pairs.csv"}`) (classical teacher, ' \
@@ -50,11 +50,12 @@ def test_adapt_a_tiny_run_exports_a_model_that_registers(synthetic_root, tmp_pat
   # Its keypoint domain chosen on the mined pairs, as the card says.
   adapted_domain = pretrained.load(str(out)).keypoints
   assert f"'{adapted_domain}' points" in card.split('| keypoints |')[1].splitlines()[0]
-  adapted, ours = pretrained.load(str(out)), pretrained.load('ours')
+  adapted, base = pretrained.load(str(out)), pretrained.load(pretrained.DEFAULT)
   assert adapted.step == 2
-  # Every weight starts from ours (init_scope 'model'), the detector's too, and moved a little.
+  # Every weight starts from the default model (init_scope 'model'), the detector's too, and
+  # moved a little.
   moved = jax.tree.map(lambda a, b: float(np.abs(np.asarray(a) - np.asarray(b)).max()),
-                       adapted.variables['params'], ours.variables['params'])
+                       adapted.variables['params'], base.variables['params'])
   assert 0 < max(jax.tree.leaves(moved)) < 0.05
   pair = registration_sets.read_registration_set(synthetic_root / 'test_kitti')[0]
   reg, _, _ = pipeline.register(target=io.read_cloud(pair.cloud1),

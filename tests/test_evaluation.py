@@ -457,12 +457,12 @@ def test_rows_of_the_register_command_register_as_the_command_does(tmp_path):
     paths.append(str(tmp_path / f'{n}.npy'))
     np.save(paths[-1], (scan[1::2] - t[:3, 3]) @ t[:3, :3])
     pairs.append(registration_sets.RegistrationPair('x', 0, n + 1, paths[0], paths[-1], t))
-  model = pretrained.load('ours')
-  rows = {'auto+ours+upright+verify+bev': (options_lib.Options(), model),
+  ours, default = pretrained.load('ours'), pretrained.load(pretrained.DEFAULT)
+  rows = {'auto+ours+upright+verify+bev': (options_lib.Options(), ours),
           'register_fpfh': (options_lib.Options(descriptor='fpfh'), None),
-          'register_descriptor': (options_lib.Options(verify=0, bev=0), model)}
+          'register_descriptor': (options_lib.Options(verify=0, bev=0), default)}
   results = registration.register_pairs(pairs, list(rows), feature_store.FeatureStore(
-      {'ours': model}), progress=False)
+      {'ours': ours, pretrained.DEFAULT: default}), progress=False)
   for row, (options, m) in rows.items():
     command = pipeline.register_many([(p.cloud1, p.cloud2) for p in pairs], clean.read_metres,
                                      model=m, options=options, say=lambda line: None)
@@ -482,7 +482,8 @@ def test_a_command_row_describes_with_the_models_own_keypoints():
   for row, want in (('register', 'structure'), ('register_descriptor', 'structure'),
                     ('auto+ours+upright+verify+bev', 'all'),
                     ('structure+ours+upright+verify+bev', 'structure')):
-    _, model = feature_store.command_options(row, {'ours': adapted})
+    _, model = feature_store.command_options(row, {'ours': adapted,
+                                                   pretrained.DEFAULT: adapted})
     assert model.keypoints == want, row
     assert cloud_features.domain_of(model) == want, row
 

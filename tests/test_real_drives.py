@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from experiments.data import make_real_pairs
+from ssd_jax import pretrained
 from ssd_jax.configs.evals import real_drives as real_drives_config
 from ssd_jax.data import clean, io, real_drives, registration_sets
 from ssd_jax.evaluation import evaluators
@@ -62,10 +63,11 @@ def test_a_real_drive_set_and_its_evaluation(tmp_path):
   del config.evals.livox, config.evals.riverside
   config.evals.drives.dataset = str(out)
   config.evals.drives.rows = ('register', 'bev')
-  config.checkpoints = {'ours': 'ours'}
+  config.checkpoints = {pretrained.DEFAULT: pretrained.DEFAULT}
   report, text = evaluators.evaluate(config, tmp_path / 'eval', log=lambda s: None)
   assert 'right poses trusted, % (n)' in text and 'overlap 0.7-1' in text
-  summary = [l for l in text.splitlines() if l.startswith('| register defaults, ours')][0]
+  summary = [l for l in text.splitlines()
+             if l.startswith(f'| register defaults, {pretrained.DEFAULT}')][0]
   cells = [c.strip() for c in summary.split('|')[1:-1]]
   assert cells[1] == '100.0', summary   # both pairs (2.6 m apart, 0.89 overlap)
   assert cells[-2] == '100.0 (2)' and cells[-1] == '-', summary

@@ -93,7 +93,7 @@ def test_register_cli_errors(tiny_set, tmp_path):
 @pytest.mark.multiprocess
 @pytest.mark.slow
 def test_register_cli_describes_with_the_shipped_model_by_default(tiny_set, tmp_path):
-  """No --descriptor, no --checkpoint: the shipped `ours` model describes, the pair registers."""
+  """No --descriptor, no --checkpoint: the shipped default model describes, the pair registers."""
   folder = tiny_set / 'test_kitti' / '00'
   pair = registration_sets.read_registration_set(folder)[0]
   out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
@@ -101,13 +101,14 @@ def test_register_cli_describes_with_the_shipped_model_by_default(tiny_set, tmp_
              f'--json={tmp_path / "r.json"}')
   assert out.returncode == 0, out.stderr[-3000:]
   result = json.loads((tmp_path / 'r.json').read_text())
-  assert result['descriptor'] == 'learned' and result['model'] == 'ours'
-  assert result['keypoints'] == 'auto' and result['keypoint_domain'] == 'all'   # ours: all points
+  assert result['descriptor'] == 'learned' and result['model'] == pretrained.DEFAULT
+  assert result['keypoints'] == 'auto' and result['keypoint_domain'] == 'all'   # its own: all
   # Verified poses: one sampling of 32 points of each ball (an eighth of the network's
   # work), not the model's own 4 of 64 (the paper's protocol).
   assert result['draws'] == options_lib.VERIFIED_DRAWS == 1
   assert result['num_samples'] == options_lib.VERIFIED_SAMPLES == 32
-  assert (pretrained.load('ours').draws, pretrained.load('ours').num_samples) == (4, 64)
+  default = pretrained.load(pretrained.DEFAULT)
+  assert (default.draws, default.num_samples) == (4, 64)
   assert result['errors']['success'], result
   # --draws=0: the model's own setting; the same pair registers alike.
   out = _run('experiments.register', f'--cloud1={pair.cloud1}', f'--cloud2={pair.cloud2}',
@@ -211,13 +212,20 @@ def test_register_fuzz_bad_files_fail_in_one_line_or_register_correctly(tiny_set
       'few.npy': (write('few.npy', c1[:5]), 'keypoints: found'),
       'plane.npy': (write('plane.npy', np.c_[rng.uniform(-20, 20, (5000, 2)), np.zeros(5000)]),
                     'keypoints: found'),
-      'cloud.txt': (write('cloud.txt', b'1 2 3\n'), 'unsupported file type'),
+      'scan.e57': (write('scan.e57', b'1 2 3\n'), 'unsupported file type'),
+      'words.txt': (write('words.txt', b'poses of the drive\n'), 'no line of three or more'),
+      'one.txt': (write('one.txt', b'1 2 3\n'), 'all 1 points coincide'),
   }
   good_pairs = {   # name -> (cloud 1, cloud 2, T_12 expected)
       'float64 rows': (write('a64.bin', c1.astype('<f8')), write('b64.bin', c2.astype('<f8')),
                        pair.transform),
       'intensity 0-255': (write('ai.bin', np.c_[c1, rng.uniform(0, 255, len(c1))].astype('<f4')),
                           write('bi.bin', np.c_[c2, rng.uniform(0, 255, len(c2))].astype('<f4')),
+                          pair.transform),
+      'text .xyz, .csv': (write('a.xyz', b'\n'.join(b' '.join(b'%.6f' % v for v in p)
+                                                    for p in c1)),
+                          write('b.csv', b'x,y,z\n' + b'\n'.join(b','.join(b'%.6f' % v for v in p)
+                                                                 for p in c2)),
                           pair.transform),
       'UTM .ply': (write('a.ply', c1 + utm), write('b.ply', c2 + utm),
                    geometry.make_transform(np.eye(3), utm) @ pair.transform @

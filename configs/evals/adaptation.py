@@ -21,6 +21,8 @@ Commands (~1.5 hours on 2 CPU cores in all):
         --config.model.partner_centers=False [--config.seed=1 --out=exports/vlp16_plain_s1]
     python -m experiments.evaluate --config=configs/evals/adaptation.py --workdir=runs/adaptation
 
+The figures were measured from `ours`: `--init=ours` on each adapt command naming no other
+(without it, the register command's model, `ours_mined`).
 The figures below were measured with every scan mined and no widening: add
 `--config.mining.max_scans=210 --config.mining.widen_rounds=0` to the first adapt command.
 (`--poses` only lets `experiments.mine --poses=...` report the mined labels' precision;

@@ -19,6 +19,8 @@ every scan mined and no widening: add `--config.mining.max_scans=210
     python -m experiments.evaluate --config=configs/evals/adaptation_os0.py \
         --workdir=runs/adaptation_os0
 
+The figures were measured from `ours`: `--init=ours` on each adapt command naming no other
+(without it, the register command's model, `ours_mined`).
 Rows: the descriptor alone (upright RANSAC's best pose) from farthest-point keypoints of
 all points (`auto+`) or of the structure above the ground (`structure+`, where the
 adapted model's keypoints lie) for FPFH, each shipped model and each adapted one; the

@@ -13,16 +13,17 @@ OS1-64 run along a river whose first 32 keyframes are among the five):
         --drives=new_Riverside02_bag_281 --per_bin=16 --out=data_cache/riverside02_pairs
     python -m experiments.evaluate --config=configs/evals/real_drives.py --workdir=runs/real_drives
 
-Rows: the register command's defaults with `ours` and with FPFH, and `ours` alone
-(--verify=0 --bev=0), run through the command's own path (`pipeline.Registrar`) with its
-verdict; the BEV search alone, verified; Open3D's ISS + FPFH pipeline; KISS-Matcher + ICP
-where `kiss-matcher` is installed (pip install '.[bench]'). A set not made is skipped and
-the report says so. Open3D's row takes ~13 s a pair on the five drives' scans: drop it
-(`--config.evals.drives.rows=...`) for a quick run.
+Rows: the register command's defaults with its model (`pretrained.DEFAULT`, `ours_mined`)
+and with FPFH, and its model alone (--verify=0 --bev=0), run through the command's own
+path (`pipeline.Registrar`) with its verdict; the BEV search alone, verified; Open3D's ISS +
+FPFH pipeline; KISS-Matcher + ICP where `kiss-matcher` is installed (pip install
+'.[bench]'). A set not made is skipped and the report says so. Open3D's row takes ~13 s a
+pair on the five drives' scans: drop it (`--config.evals.drives.rows=...`) for a quick run.
 
-Expected (2-core VM): the defaults with `ours` register 91.6 % of the five drives' 214
-pairs and 53.8 % of the Livox drive's 80; docs/notes/real_drives.md has the tables and
-what each stage loses.
+Expected (2-core VM): the defaults register 90.7 % of the five drives' 214 pairs, 56.2 %
+of the Livox drive's 80 and 90.6 % of Riverside02's 128 (`--config.checkpoints.ours_mined=ours`
+for `ours`: 91.6, 53.8 and 81.2 %); docs/notes/real_drives.md has the tables and what each
+stage loses.
 """
 
 import ml_collections

@@ -1,12 +1,13 @@
-"""Label-free adaptation of the shipped `ours` to a user's own sensor: fine-tune every
-weight on a folder of unlabeled scans from that sensor (no poses, no labels).
+"""Label-free adaptation of the register command's model (`pretrained.DEFAULT`,
+`ours_mined`) to a user's own sensor: fine-tune every weight on a folder of unlabeled scans
+from that sensor (no poses, no labels).
 
 Command (what `experiments.adapt` runs, with its mining, model card and export):
 
     python -m experiments.adapt --scans=/data/my_vlp16_drive --out=exports/my_vlp16
 
-`configs/training/ours.py` (the recipe of `ours`) started from `ours`' weights, at a
-third of its learning rate, decayed to 0 over 1,500 steps. The command first mines pairs
+`configs/training/ours.py` (the recipe of `ours`) started from that model's weights
+(`--init`), at a third of its learning rate, decayed to 0 over 1,500 steps. The command first mines pairs
 of the drive (`experiments.mine`) and sets `data.pairs` to them: half of the second
 branches are then a real second scan of the place (`data.pairs_rate` 0.5). As
 `ours_rescan`, PC2's centres are the partners of PC1's and an InfoNCE at them joins the
@@ -26,6 +27,7 @@ tables (VLP-16, OS0-64, a Livox drive) and the times.
 
 import ml_collections
 
+from ssd_jax import pretrained
 from ssd_jax.configs.training import ours as ours_config
 
 
@@ -33,7 +35,7 @@ def get_config():
   config = ours_config.get_config()
   config.data.path = ''              # set by --scans
   config.data.eval_path = ''
-  config.train.init_from = 'ours'
+  config.train.init_from = pretrained.DEFAULT
   config.train.init_scope = 'model'
   config.model.contrastive_weight = 1.0
   config.model.partner_centers = True

@@ -75,7 +75,7 @@ flags.DEFINE_list('register_flags', [], 'Extra flags of the register command, e.
                   '--register_flags=--sampling=uniform (an ablation of its defaults).')
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-NAMES = {'register': 'register, defaults (`ours`)',
+NAMES = {'register': f'register, defaults (`{pretrained.DEFAULT}`)',
          'open3d': "Open3D ISS + FPFH + RANSAC (the paper's searches)",
          'open3d_tutorial': "Open3D ISS + FPFH + RANSAC (its tutorial's searches)",
          'kiss_matcher': 'KISS-Matcher + Open3D point-to-plane ICP'}
@@ -242,7 +242,7 @@ def main(argv):
     # Warm: another pair first, then pair 0 (its own clouds, met for the first time).
     *_, warm = pipeline.register_many(
         [(first[1].cloud1, first[1].cloud2), (first[0].cloud1, first[0].cloud2)], _read,
-        model=pretrained.load('ours'), say=lambda line: None)
+        model=pretrained.load(pretrained.DEFAULT), say=lambda line: None)
     rows.append(('(first set, pair 0)', 'register', 'warm: 1 pair in process', 1,
                  [warm.seconds], [bool(metrics.registration_errors(
                      first[0].transform, warm.registration.transform)['success'])]))

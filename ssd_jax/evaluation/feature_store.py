@@ -58,11 +58,13 @@ CLUSTERS_KEPT = 8
 # runs the register command's own path (`command_options`).
 VERIFY_CANDIDATES = 10
 BEV_CANDIDATES = 5
-# Rows named after the register command: its defaults with `ours` and with FPFH, and
-# `ours` alone -> (label, descriptor, the `options.Options` fields that differ).
-COMMAND_ROWS = {'register': ('register defaults, ours', 'ours', {}),
+# Rows named after the register command: its defaults with its model (`pretrained.DEFAULT`,
+# the evaluation's checkpoint of that name) and with FPFH, and its model alone -> (label,
+# descriptor, the `options.Options` fields that differ).
+COMMAND_ROWS = {'register': (f'register defaults, {pretrained.DEFAULT}', pretrained.DEFAULT, {}),
                 'register_fpfh': ('register defaults, FPFH', 'fpfh', {}),
-                'register_descriptor': ('descriptor alone (--verify=0 --bev=0), ours', 'ours',
+                'register_descriptor': (f'descriptor alone (--verify=0 --bev=0), '
+                                        f'{pretrained.DEFAULT}', pretrained.DEFAULT,
                                         {'verify': 0, 'bev': 0})}
 
 
