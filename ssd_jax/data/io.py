@@ -281,7 +281,7 @@ def read_cloud(path: str | os.PathLike, fmt: str = 'auto') -> np.ndarray:
   if suffix == '.vtk':
     return read_vtk(path)
   raise CloudFileError(f'{path}: unsupported file type {suffix!r}; supported: '
-                       f'{CLOUD_SUFFIXES + TEXT_SUFFIXES[2:]}')
+                       f'{" ".join(sorted(set(CLOUD_SUFFIXES + TEXT_SUFFIXES)))}')
 
 
 _NUMBER = re.compile(r'^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^[-+]?(nan|inf)$', re.I)
