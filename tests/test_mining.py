@@ -176,11 +176,39 @@ def test_a_long_drive_is_thinned_and_widening_doubles_the_reached_gap():
   assert mining.spread(scans, 120, 2) == scans[108:348:2]
   with pytest.raises(errors.UserError, match='max_scans must be 3 or more'):
     mining.spread(scans, 2)
-  poses = [_pose(0, 2.0 * k, 0) for k in range(9)]
+  poses = [_pose(0, 2.0 * k, 0) for k in range(17)]
   pairs = [_pair(poses, 0, 2), _pair(poses, 0, 8)]
   pairs[0].kept = True
   assert mining.widened_gaps(pairs) == (4, 8)
   assert mining.widened_gaps(pairs[1:]) == ()
+  # A gap whose probe failed with one pair kept of 8 (under MIN_YIELD) is widened to.
+  probe = [_pair(poses, k, k + 8) for k in range(8)]
+  probe[0].kept = True
+  assert mining.widened_gaps(pairs + probe) == (4, 8)
+  for p in probe[1:2]:
+    p.kept = True
+  assert mining.widened_gaps(pairs + probe) == (16, 32)
+
+
+def test_a_learned_teacher_retries_the_pairs_the_classical_one_could_not(monkeypatch):
+  """Mining with a model registers again, once, the done pairs that are not confident;
+  without one, no done pair is registered again."""
+  scans = [f's{k}' for k in range(6)]
+  done = {(f's{k}', f's{k + 1}'): mined_pairs.MinedPair(f's{k}', f's{k + 1}', 1, np.eye(4), 0.1,
+                                                          k % 2 == 0) for k in range(5)}
+  registered = []
+
+  def register_many(pairs, read, model, options, say):
+    registered.append(list(pairs))
+    return [(a, b) for a, b in pairs]
+  monkeypatch.setattr(mining.pipeline, 'register_many', register_many)
+  monkeypatch.setattr(mining, '_judged', lambda result, gap: mined_pairs.MinedPair(
+      *result, gap, np.eye(4), 0.5, True))
+  mining.mine(scans, None, gaps=(1,), model=object(), done=done, say=lambda s: None)
+  assert sorted(p for batch in registered for p in batch) == [('s1', 's2'), ('s3', 's4')]
+  registered.clear()
+  mining.mine(scans, None, gaps=(1,), done=done, say=lambda s: None)
+  assert not any(registered)
 
 
 def test_a_widening_round_is_gated_with_the_labels_before_it(drive, tmp_path):

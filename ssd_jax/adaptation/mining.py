@@ -114,9 +114,11 @@ def stride_for(scans: Sequence[str], read: Callable[[str], np.ndarray], max_scan
 
 
 def widened_gaps(pairs: Sequence[MinedPair], count: int = 2) -> tuple[int, ...]:
-  """The `count` gaps after the largest at which `pairs` kept any, each twice the last
-  (() when none was kept)."""
-  reached = max((p.gap for p in pairs if p.kept), default=0)
+  """The `count` gaps after the largest at which `pairs` kept MIN_YIELD of those
+  registered, each twice the last (() when none was): a gap whose probe failed, with a
+  stray pair kept, is widened to, not past."""
+  reached = max((g for g in {p.gap for p in pairs}
+                 if np.mean([p.kept for p in pairs if p.gap == g]) >= MIN_YIELD), default=0)
   return tuple(reached * 2 ** k for k in range(1, count + 1)) if reached else ()
 
 
@@ -181,7 +183,8 @@ def mine(scans: Sequence[str], read: Callable[[str], np.ndarray], *,
   (metres, each scan in its sensor's frame); options: the registration (default
   `teacher_options()`, or the register command's defaults with `model`, a learned teacher
   registered in this process); done: pairs registered by an earlier run, by (cloud1,
-  cloud2), not registered again; on_pair: called with each pair as it is registered
+  cloud2), not registered again (with `model`, those not confident are, once: the
+  widening's model retries what the classical teacher could not); on_pair: called with each pair as it is registered
   (before the gate), e.g. to append it to a file; say: told the gap at which mining
   stopped; workers: processes registering chunks of CHUNK consecutive pairs at once
   (`read` must then be picklable, e.g. a module function or a `functools.partial` of one);
@@ -197,8 +200,13 @@ def mine(scans: Sequence[str], read: Callable[[str], np.ndarray], *,
         workers, mp_context=multiprocessing.get_context('spawn'), initializer=_end_with,
         initargs=(os.getpid(),))) if workers > 1 and model is None else None)
 
+    tried = set()   # registered by this call
+
     def run(pairs, gap):
-      fresh = [p for p in pairs if p not in done]
+      # A learned teacher retries what an earlier one could not register, once.
+      fresh = [p for p in pairs if p not in tried and (
+          p not in done or (model is not None and not done[p].confident))]
+      tried.update(fresh)
       if pool is None or len(fresh) <= CHUNK:
         stream = (_judged(result, gap) for result in pipeline.register_many(
             fresh, read, model=model, options=options, say=lambda line: None))
