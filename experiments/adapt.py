@@ -7,8 +7,8 @@ fine-tune on them, then export the model with a model card.
     python -m experiments.register --cloud1=A.bin --cloud2=B.bin --descriptor=learned \
         --checkpoint=exports/my_sensor
 
-The scans (.bin/.npy/.ply/.pcd/.las/.laz/.xyz/.pts/.vtk, one sweep each, centred on the sensor, z up)
-are read in name order as a drive. `--pairs=auto` first mines pairs of them
+The scans (.bin/.npy/.ply/.pcd/.las/.laz/.xyz/.pts/.vtk, one sweep each, centred on the
+sensor, z up) are read in name order as a drive. `--pairs=auto` first mines pairs of them
 (`experiments.mine`: the classical registration, kept where the verdict trusts its poses
 and they close loops; no pose is read; a long drive thinned to `mining.max_scans` scans,
 every k-th, k halved while its teacher cannot close loops of three: `mining.stride_for`)
@@ -90,6 +90,8 @@ Use it: `--checkpoint={out}` (register, evaluate, learning_curve) or
 
 SINGLE_OBJECTIVE = ("the paper's self-supervision, each scan against a turned, re-sampled "
                     'copy of itself.')
+# The scans as every step of the command reads them (picklable: mining's workers take it).
+_READ = functools.partial(clean.read_metres, fmt='auto')
 PAIRS_OBJECTIVE = ("the paper's self-supervision with {rate:.0%} of the second branches a real "
                    'second scan of the place, moved into the first by the transform the '
                    'miner found (two-view training); the rest a turned copy of the scan.')
@@ -101,8 +103,8 @@ def _mine(path: str, scans: list[str], gaps: tuple[int, ...], model=None, desc='
   the classical teacher, or `model`)."""
   with tqdm.tqdm(total=len(mining.candidate_pairs(len(scans), gaps)), desc=desc,
                  unit='pair') as bar:
-    pairs = mining.mine_to_file(path, scans, functools.partial(clean.read_metres, fmt='auto'),
-                                gaps=gaps, model=model, progress=bar.update, say=bar.write,
+    pairs = mining.mine_to_file(path, scans, _READ, gaps=gaps, model=model,
+                                progress=bar.update, say=bar.write,
                                 workers=mining.DEFAULT_WORKERS)
     bar.total = bar.n   # the total counted every gap; mining stops at the first that fails
     bar.refresh()
@@ -163,8 +165,7 @@ def _keypoints(run_dir: str, pairs_csv: str) -> tuple[str, str]:
     return 'all', "'all' points (no mined pairs to choose on)"
   print('choosing where to sample keypoints, on mined pairs farther apart than the miner '
         'reached ...')
-  choice = keypoint_choice.choose(pretrained.load(run_dir), mined_pairs.read_kept(pairs_csv),
-                                  functools.partial(clean.read_metres, fmt='auto'))
+  choice = keypoint_choice.choose(pretrained.load(run_dir), mined_pairs.read_kept(pairs_csv), _READ)
   if choice is None:
     return 'all', "'all' points (no chain of mined pairs to choose on)"
   print(choice.line())
@@ -186,8 +187,8 @@ def main(argv):
   try:
     scans = [str(p) for p in io.list_clouds(FLAGS.scans)]
     num_scans = len(scans)
-    stride = (mining.stride_for(scans, functools.partial(clean.read_metres, fmt='auto'),
-                                config.mining.max_scans) if FLAGS.pairs == 'auto' else None)
+    stride = (mining.stride_for(scans, _READ, config.mining.max_scans)
+              if FLAGS.pairs == 'auto' else None)
     mined = mining.spread(scans, config.mining.max_scans, stride)
     start = time.perf_counter()
     config.data.pairs = _pairs(mined)

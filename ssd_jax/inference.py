@@ -6,15 +6,15 @@
     desc = jax.jit(jax.vmap(f))(clouds, keypoints, valid)         # [B, N, 3] -> [B, K, D]
     kp_idx, attention = inference.detect(model, cloud)            # 3DFeat-Net keypoints
 
-The network runs jitted on clusters of a fixed chunk size (the last chunk is
-padded and its outputs dropped). Each cluster's points are gathered on the host, so
-the network compiles once whatever the cloud's and keypoint set's size. Neighbourhoods
-are PointNet++ ball queries (the first c points within r in index order, padded by
-repeating the first), found by a host KD-tree (scipy), far faster on CPU for large
-clouds than `grouping.ball_query`'s dense distances, which `describe_fn` uses inside
-JAX, with the same clusters (tested). Clouds are put in a seeded random order first, so that "first c in index
-order" is a random sample of the ball, as in training (`describe` finds each ball
-once and, for each draw, keeps the members that come first in that draw's order).
+The network runs jitted on clusters of a fixed chunk size (the last chunk is padded and its
+outputs dropped). Each cluster's points are gathered on the host, so the network compiles
+once whatever the cloud's and keypoint set's size. Neighbourhoods are PointNet++ ball
+queries (the first c points within r in index order, padded by repeating the first), found
+by a host KD-tree (scipy), far faster on CPU for large clouds than `grouping.ball_query`'s
+dense distances, which `describe_fn` uses inside JAX, with the same clusters (tested).
+Clouds are put in a seeded random order first, so that "first c in index order" is a random
+sample of the ball, as in training (`describe` finds each ball once and, for each draw,
+keeps the members that come first in that draw's order).
 """
 
 from __future__ import annotations
@@ -416,7 +416,8 @@ def detect_at(model: Model, points: np.ndarray, centers: np.ndarray, chunk: int 
   return _run_groups(model, points[idx], centers, has, chunk, 'detect')
 
 
-def attention(model: Model, points: np.ndarray, chunk: int = 2048, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def attention(model: Model, points: np.ndarray, chunk: int = 2048, seed: int = 0
+              ) -> tuple[np.ndarray, np.ndarray]:
   """Attention [N] and orientation [N] (radians) with every point as a cluster center."""
   return detect_at(model, points, points, chunk, seed)
 

@@ -7,18 +7,18 @@ Command (what `experiments.adapt` runs, with its mining, model card and export):
     python -m experiments.adapt --scans=/data/my_vlp16_drive --out=exports/my_vlp16
 
 `configs/training/ours.py` (the recipe of `ours`) started from that model's weights
-(`--init`), at a third of its learning rate, decayed to 0 over 1,500 steps. The command first mines pairs
-of the drive (`experiments.mine`) and sets `data.pairs` to them: half of the second
-branches are then a real second scan of the place (`data.pairs_rate` 0.5). As
+(`--init`), at a third of its learning rate, decayed to 0 over 1,500 steps. The command
+first mines pairs of the drive (`experiments.mine`) and sets `data.pairs` to them: half of
+the second branches are then a real second scan of the place (`data.pairs_rate` 0.5). As
 `ours_rescan`, PC2's centres are the partners of PC1's and an InfoNCE at them joins the
-rotation loss (`model.partner_centers`, `model.contrastive_weight` 1). A drive of more
-than `mining.max_scans` scans is mined on every k-th; after half the steps the model
-trained so far mines the next two doubled gaps (`mining.widen_rounds`, EYOC's widening)
-and the rest train on every kept pair. Last, the command sets the export's
-`inference.keypoints`: 'all' where the adapted descriptor alone registers more of 32
-chained mined pairs past the miner's gaps from all points than from the structure above
-the ground (`adaptation.keypoint_choice`), else 'structure'. Each scan must be
-one sweep centred on its sensor (z up), in capture order by name.
+rotation loss (`model.partner_centers`, `model.contrastive_weight` 1). A drive of more than
+`mining.max_scans` scans is mined on every k-th; after half the steps the model trained so
+far mines the next two doubled gaps (`mining.widen_rounds`, EYOC's widening) and the rest
+train on every kept pair. Last, the command sets the export's `inference.keypoints`: 'all'
+where the adapted descriptor alone registers more of 32 chained mined pairs past the
+miner's gaps from all points than from the structure above the ground
+(`adaptation.keypoint_choice`), else 'structure'. Each scan must be one sweep centred on
+its sensor (z up), in capture order by name.
 
 Expected (`configs/evals/adaptation_os0.py`: a unit no shipped model saw): the descriptor
 alone 55.2 -> 70.8 %; docs/notes/cross_sensor.md and docs/notes/real_drives.md have the

@@ -179,17 +179,17 @@ def mine(scans: Sequence[str], read: Callable[[str], np.ndarray], *,
   Gaps are mined from the smallest up. Each gap starts with a probe, every PROBE_EVERY-th
   of its pairs (MIN_PROBE at least); when under MIN_YIELD of them are confident, that gap
   and every larger one are left (the scans are too far apart there to register, and the
-  teacher spends longest on pairs it cannot register). read: path -> [N, 3] points
-  (metres, each scan in its sensor's frame); options: the registration (default
-  `teacher_options()`, or the register command's defaults with `model`, a learned teacher
-  registered in this process); done: pairs registered by an earlier run, by (cloud1,
-  cloud2), not registered again (with `model`, those not confident are, once: the
-  widening's model retries what the classical teacher could not); on_pair: called with each pair as it is registered
-  (before the gate), e.g. to append it to a file; say: told the gap at which mining
-  stopped; workers: processes registering chunks of CHUNK consecutive pairs at once
-  (`read` must then be picklable, e.g. a module function or a `functools.partial` of one);
-  the pairs and their poses do not depend on it. A pair whose file cannot be read is not
-  confident (its reason says why); the others go on."""
+  teacher spends longest on pairs it cannot register). read: path -> [N, 3] points (metres,
+  each scan in its sensor's frame); options: the registration (default `teacher_options()`,
+  or the register command's defaults with `model`, a learned teacher registered in this
+  process); done: pairs registered by an earlier run, by (cloud1, cloud2), not registered
+  again (with `model`, those not confident are, once: the widening's model retries what the
+  classical teacher could not); on_pair: called with each pair as it is registered (before
+  the gate), e.g. to append it to a file; say: told the gap at which mining stopped;
+  workers: processes registering chunks of CHUNK consecutive pairs at once (`read` must
+  then be picklable, e.g. a module function or a `functools.partial` of one); the pairs and
+  their poses do not depend on it. A pair whose file cannot be read is not confident (its
+  reason says why); the others go on."""
   if options is None:
     options = teacher_options() if model is None else options_lib.Options()
   done = dict(done or {})
