@@ -55,6 +55,8 @@ flags.DEFINE_integer('bev', DEFAULTS.bev, "Also check the bird's-eye-view search
 flags.DEFINE_list('descriptor', [DEFAULTS.descriptor], 'learned, fpfh; a list runs each.')
 flags.DEFINE_enum('level', DEFAULTS.level, options_lib.LEVELS,
                   'ground: level each tilted scan by its ground first; none: take z as up.')
+flags.DEFINE_enum('retry', DEFAULTS.retry, options_lib.RETRIES, 'fpfh: register a pose the '
+                  'verdict refuses again with FPFH (learned descriptors, --verify > 0).')
 flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: '
                     f'{pretrained.DEFAULT}, or ours_detector for learned keypoints).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding the pairs (optional).')
@@ -79,7 +81,7 @@ def _options(descriptor: str) -> options_lib.Options:
                            "about z only, and are checked with RANSAC's)")
   return options_lib.Options(FLAGS.keypoints, descriptor, FLAGS.ransac, FLAGS.verify, FLAGS.bev,
                              FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed,
-                             FLAGS.level, FLAGS.sampling)
+                             FLAGS.level, FLAGS.sampling, FLAGS.retry)
 
 
 def _read(path: str) -> np.ndarray:
@@ -107,8 +109,7 @@ def _batch(options: options_lib.Options, model, model_name: str) -> None:
     t_gt = (outputs.ground_truth(FLAGS.groundtruth, result.target, result.source, False, truth)
             if truth is not None and not result.error else None)
     written.add(result, t_gt)
-  failed = written.failed(pairs)
-  registered = written.registered(pairs)
+  failed, registered = written.failed(pairs), written.registered(pairs)
   print(f'wrote {written.path}: {len(pairs)} pairs'
         + (f' ({written.kept} kept from an earlier run)' if written.kept else '')
         + f', {options.descriptor} descriptors ({model_name if model else "Open3D"}): '
@@ -138,8 +139,7 @@ def main(argv):
   if not batch and not (FLAGS.cloud1 and FLAGS.cloud2):
     raise errors.UserError('give --cloud1 and --cloud2 (or --pairs / --sequence with --out)')
   options = [_options(d) for d in FLAGS.descriptor]
-  # The shipped descriptor model's attention is untrained: learned keypoints need the
-  # shipped self-supervised detector.
+  # Learned keypoints need the shipped detector: the descriptor models' attention is untrained.
   name = FLAGS.checkpoint or ('ours_detector' if FLAGS.keypoints == 'learned'
                               else pretrained.DEFAULT)
   loaded = pretrained.load(name) if any(o.needs_model for o in options) else None

@@ -153,18 +153,19 @@ def test_coarse_to_fine_ends_at_a_confident_coarse_pose_and_else_registers_as_wi
   assert reg.levels_tried == 1 and len(f1.xyz) == cloud_features.COARSE_KEYPOINTS
   assert reg.verified_fitness.max() >= verification.CONFIDENT_FITNESS
   for path in (paths['a'], paths['b']):
-    levels = registrar.cloud(path)[0].features
+    levels = registrar.cloud(path)[0].features['learned']
     assert len(levels.described()) == cloud_features.COARSE_KEYPOINTS < len(levels.idx)
   assert metrics.registration_errors(truth['b'], reg.transform)['success']
 
   monkeypatch.setattr(verification, 'CONFIDENT_FITNESS', 1.01)   # never confident
   fine = pipeline.Registrar(np.load, model=model, say=lambda line: None)
   reg_fine, g1, _ = fine.register(paths['a'], paths['b'])
-  assert reg_fine.levels_tried == 2 and len(g1.xyz) == len(fine.cloud(paths['a'])[0].features.idx)
   entries = [fine.cloud(p)[0] for p in (paths['a'], paths['b'])]
+  levels = [e.features['learned'] for e in entries]
+  assert reg_fine.levels_tried == 2 and len(g1.xyz) == len(levels[0].idx)
   one_level, _, _ = pair_stages.coarse_to_fine(
-      entries[0].features.levels[-1:], entries[1].features.levels[-1:], entries[0].points,
-      entries[1].points, candidates=10, bev_candidates=5)
+      levels[0].levels[-1:], levels[1].levels[-1:], entries[0].points, entries[1].points,
+      candidates=10, bev_candidates=5)
   np.testing.assert_array_equal(reg_fine.transform, one_level.transform)
   assert metrics.registration_errors(truth['b'], reg_fine.transform)['success']
 

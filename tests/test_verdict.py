@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from ssd_jax import inference, pretrained
 from ssd_jax.data import clean, groundtruth, io, kitti
 from ssd_jax.registration import free_space, metrics, pipeline, prepared, verdict
 from ssd_jax.registration import options as options_lib
@@ -114,3 +115,28 @@ def test_register_returns_the_verdict_with_the_pose():
   assert metrics.registration_errors(t12, reg.transform)['success']
   assert reg.verdict.registered and reg.verdict.conflict is not None, reg.verdict
   assert reg.verdict.fitness >= verdict.MIN_FITNESS
+
+
+@pytest.mark.real_data
+def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
+  """A learned descriptor that fails on a pair (here noise: its candidates hold no right
+  pose, and the BEV search is off) leaves a pose the verdict refuses; the retry registers
+  the pair again with FPFH at the same keypoints and keeps its pose, which is right and
+  trusted, with a note saying so. Without the retry the refused pose stands."""
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  monkeypatch.setattr(inference, 'describe', lambda model, points, at, **kw: (
+      np.random.default_rng(len(points)).normal(size=(len(at), 32)).astype(np.float32)))
+  model = pretrained.load(pretrained.DEFAULT)
+  registered = {}
+  for retry in options_lib.RETRIES:
+    registered[retry], f1, _ = pipeline.register(
+        target=cloud1, source=cloud2, model=model,
+        options=options_lib.Options(bev=0, retry=retry))
+  first, again = registered['none'], registered['fpfh']
+  assert not first.verdict.registered, first.verdict
+  assert not metrics.registration_errors(t12, first.transform)['success']
+  assert again.verdict.registered, again.verdict
+  assert metrics.registration_errors(t12, again.transform)['success']
+  assert f1.descriptors.shape[1] == 33   # FPFH's 33 bins: the features of the pose kept
+  assert pipeline.RETRY_NOTE.format(first.verdict.reason) in again.notes, again.notes
+  assert again.seconds['ransac'] > first.seconds['ransac']   # both tries are counted

@@ -20,7 +20,7 @@ evaluation describes with the adapted weights in their place (an export keeps it
 keypoint domain). `--init=ours` adapts `ours` instead, `--config.checkpoints.ours_mined=ours`
 measures it; `--config.mining.widen_rounds=0` adapts without the widening, at equal steps.
 Expected (2-core VM), defaults at 10-20 m, adapted against the default model: HKU_MB
-50.0 % against 43.8 %; Riverside02 100.0 % against 93.8 %; the descriptor alone at 10-20 m
+56.2 % against 50.0 %; Riverside02 100.0 % against 93.8 %; the descriptor alone at 10-20 m
 31.2 % against 25.0 % and 84.4 % against 68.8 %; docs/notes/real_drives.md has the tables.
 """
 

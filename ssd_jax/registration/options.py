@@ -28,6 +28,11 @@ ESTIMATORS = ('rigid', 'upright')
 SAMPLINGS = ('auto', 'compatible', 'uniform')
 # Whether each scan is first turned level by its ground (`Options.level`, `leveling`).
 LEVELS = ('none', 'ground')
+# What registers a pair again whose learned descriptors' pose the verdict refuses: 'fpfh',
+# the classical descriptor at the same keypoints, its pose kept where the verdict trusts
+# it; 'none'. Two descriptors that fail on different pairs: where the learned one's
+# candidates hold no right pose, FPFH's sometimes do (docs/notes/real_drives.md).
+RETRIES = ('none', 'fpfh')
 
 
 # How the learned descriptor samples each ball where the candidate poses are verified
@@ -85,6 +90,9 @@ class Options:
               RANSAC over any rotation, and notes say which) or
               'none' (the clouds as given: z is taken to be up). `register_many` levels
               each cloud once.
+  retry       RETRIES: 'fpfh' (with learned descriptors and verify > 0, a pose the
+              verdict refuses is registered again with FPFH, kept where trusted) or
+              'none'.
   """
   keypoints: str = 'auto'
   descriptor: str = 'learned'
@@ -98,11 +106,12 @@ class Options:
   seed: int = 0
   level: str = 'ground'
   sampling: str = 'auto'
+  retry: str = 'fpfh'
 
   def __post_init__(self):
     for name, allowed in (('keypoints', KEYPOINTS), ('descriptor', DESCRIPTORS),
                           ('estimator', ESTIMATORS), ('level', LEVELS),
-                          ('sampling', SAMPLINGS)):
+                          ('sampling', SAMPLINGS), ('retry', RETRIES)):
       if getattr(self, name) not in allowed:
         raise errors.UserError(f'{name} must be one of {allowed}, got {getattr(self, name)!r}')
     for name, meaning in (('verify', '0: no verification'), ('bev', '0: no BEV search'),
@@ -118,13 +127,18 @@ class Options:
     the clouds as given."""
     return cls(**{'keypoints': 'iss', 'descriptor': descriptor, 'estimator': 'rigid',
                   'verify': 0, 'bev': 0, 'level': 'none', 'sampling': 'uniform',
-                  **overrides})
+                  'retry': 'none', **overrides})
 
   @property
   def bev_candidates(self) -> int:
     """The BEV search's poses checked: `bev` with the upright estimator and verify > 0
     (its poses turn about z only and are checked with RANSAC's), else 0."""
     return self.bev if self.estimator == 'upright' and self.verify > 0 else 0
+
+  @property
+  def retries(self) -> bool:
+    """Whether a refused pose is registered again with FPFH (`retry`)."""
+    return self.retry == 'fpfh' and self.descriptor == 'learned' and self.verify > 0
 
   @property
   def needs_model(self) -> bool:

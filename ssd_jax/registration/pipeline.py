@@ -23,47 +23,14 @@ from ssd_jax.registration import options as options_lib
 Features = cloud_features.CloudFeatures
 
 
-def _register_levels(levels, fallback, cloud1, cloud2, options: options_lib.Options,
-                     progress=None):
-  """`coarse_to_fine` on two clouds' `FeatureLevels`; where ISS keypoints leave RANSAC
-  nothing to sample (too few, or every sample degenerate: a ValueError), again on
-  `fallback()`'s farthest-point levels. -> (registration, features of cloud 1, of cloud
-  2, the levels used, a note on the fallback or '')."""
-  def run(levels1, levels2):
-    return pair_stages.coarse_to_fine(
-        levels1.levels, levels2.levels, cloud1, cloud2, seed=options.seed,
-        estimator=options.estimator, candidates=max(options.verify, 1),
-        bev_candidates=options.bev_candidates, verified=options.verify > 0,
-        progress=progress, sampling=options.sampling)
-  try:
-    return (*run(*levels), levels, '')
-  except ValueError as e:
-    if options.keypoints != 'iss':
-      raise
-    levels = fallback()
-    return (*run(*levels), levels, f'{e}; registered again with {len(levels[0].idx)} / '
-            f'{len(levels[1].idx)} farthest-point keypoints')
-
-
-def _finish(reg: pair_stages.Registration, cloud1, cloud2, options: options_lib.Options,
-            origin=None, progress=None) -> pair_stages.Registration:
-  """ICP where the options ask for it, then the pose's assessment (`assess`)."""
-  if options.icp:
-    if progress is not None:
-      progress('ICP')
-    t0 = time.perf_counter()
-    reg.transform, reg.icp_fitness = pair_stages.refine_icp(cloud1.points, cloud2.points,
-                                                            reg.transform)
-    reg.seconds['icp'] = time.perf_counter() - t0
-  return pair_stages.assess(reg, cloud1, cloud2, origin=origin)
-
-
 # A pair with a scan of no ground (`Leveling.note`) is registered as given first, where its
 # poses are verified: most such scans are upright (a sparse re-scan whose ground holds too
 # few points, an indoor scan of walls), and a pose verified as `_settled` is as sure as any
 # other pair's. Otherwise nothing may assume z is up: FPFH and RANSAC over any rotation.
 UPRIGHT_NOTE = 'registered as given (z up): its verified pose is clear'
 ANY_ROTATION_NOTE = 'registered with FPFH and RANSAC over any rotation'
+# A pose the verdict refuses is registered again with FPFH (`Options.retry`).
+RETRY_NOTE = "registered again with FPFH descriptors, the learned ones' pose refused ({})"
 
 
 def _settled(reg: pair_stages.Registration) -> bool:
@@ -122,7 +89,9 @@ class PairResult:
 @dataclasses.dataclass
 class _Cloud:
   points: prepared.PreparedCloud   # on the grid, centred (`offset`), levelled (`Options.level`)
-  features: cloud_features.FeatureLevels          # keypoints and descriptors of `points`
+  # descriptor -> keypoints and descriptors of `points` (the options' own; 'fpfh' once a
+  # pair is registered again, `Options.retry`)
+  features: dict[str, cloud_features.FeatureLevels]
   seconds: dict                    # read, grid, level and its first level's features, once
   level: leveling.Leveling         # how `points` was levelled
   own: prepared.PreparedCloud      # on the grid, centred, not levelled (ICP, assessment)
@@ -150,10 +119,15 @@ class Registrar:
     self._kept: dict[str, _Cloud] = {}
     self._size = cache_size
 
-  def levels(self, points: np.ndarray, keypoints: str) -> cloud_features.FeatureLevels:
+  def levels(self, points: np.ndarray, keypoints: str, descriptor: str | None = None
+             ) -> cloud_features.FeatureLevels:
+    """The `FeatureLevels` of points [N, 3] (on the grid, levelled) with these options'
+    descriptor, or `descriptor` ('fpfh': no model)."""
     o = self._options
+    descriptor = descriptor or o.descriptor
+    model = self._model if descriptor == 'learned' else None
     coarse = cloud_features.coarse_keypoints(o.verify > 0)
-    return cloud_features.feature_levels(points, keypoints, o.descriptor, self._model, o.seed,
+    return cloud_features.feature_levels(points, keypoints, descriptor, model, o.seed,
                                          o.fpfh_max_nn, coarse)
 
   def cloud(self, path: str) -> tuple[_Cloud, bool]:
@@ -185,7 +159,8 @@ class Registrar:
       self._say(f'{name}: {f.note}')
     self._stage(f'{name}: descriptors')
     f.levels[0]()   # the first level's, which every pair needs
-    self._kept[path] = _Cloud(prepared.PreparedCloud(points) if level.turned else own, f,
+    self._kept[path] = _Cloud(prepared.PreparedCloud(points) if level.turned else own,
+                              {self._options.descriptor: f},
                               {'read': t1 - t0, 'grid': t2 - t1, 'level': t3 - t2,
                                **f.seconds}, level, own, offset)
     if len(self._kept) > self._size:
@@ -243,28 +218,67 @@ class Registrar:
 
     if groundless and not self._options.verify:
       return any_rotation({})
-    levels = [e.features for e in entries]
-    lazy = ('keypoints', 'descriptors')   # what the clouds' levels have cost until now
-    before = {stage: sum(f.seconds[stage] for f in levels) for stage in lazy}
-    reg, f1, f2, used, fallback = _register_levels(
-        levels, lambda: [self.levels(e.points.points, 'auto') for e in entries],
-        entries[0].points, entries[1].points, self._options, self._stage)
-    if fallback:
-      self._say(f'{pair_name}: {fallback}')
-      levels = levels + list(used)
-    for stage in lazy:
-      seconds[stage] += sum(f.seconds[stage] for f in levels) - before[stage]
+    pair = prepared.PreparedPair(entries[0].points, entries[1].points)   # one memo, both tries
+    reg, f1, f2 = self._upright(entries, pair, self._options, seconds, pair_name)
     if groundless:
       if not _settled(reg):
         return any_rotation(reg.seconds)
       reg.notes.append(UPRIGHT_NOTE)
+    elif self._options.retries and not reg.verdict.registered:
+      again, g1, g2 = self._upright(entries, pair, dataclasses.replace(
+          self._options, descriptor='fpfh'), seconds, pair_name)
+      spent = {k: reg.seconds.get(k, 0.0) + again.seconds.get(k, 0.0)
+               for k in reg.seconds | again.seconds}
+      if again.verdict.registered:
+        again.notes.append(RETRY_NOTE.format(reg.verdict.reason))
+        reg, f1, f2 = again, g1, g2
+      reg.seconds = spent
+    reg.seconds = {**seconds, **reg.seconds}
+    return reg, f1, f2
+
+  def _upright(self, entries: list[_Cloud], pair: prepared.PreparedPair,
+               options: options_lib.Options, seconds: dict, pair_name: str
+               ) -> tuple[pair_stages.Registration, Features, Features]:
+    """The pair (`pair`: its levelled clouds) registered upright with `options`'
+    descriptor (the clouds' kept levels, made the first time a descriptor is asked for;
+    ISS keypoints RANSAC cannot sample fall back to farthest-point ones), back in the
+    clouds' frames, ICP (`Options.icp`) and `assess`. The levels' keypoint and descriptor
+    seconds go to `seconds`."""
+    for e in entries:
+      if options.descriptor not in e.features:
+        e.features[options.descriptor] = self.levels(e.points.points, options.keypoints,
+                                                     options.descriptor)
+    levels = [e.features[options.descriptor] for e in entries]
+    lazy = ('keypoints', 'descriptors')   # what the clouds' levels have cost until now
+    before = {stage: sum(f.seconds[stage] for f in levels) for stage in lazy}
+    run = lambda pair_levels: pair_stages.coarse_to_fine(
+        pair_levels[0].levels, pair_levels[1].levels, pair, seed=options.seed,
+        estimator=options.estimator, candidates=max(options.verify, 1),
+        bev_candidates=options.bev_candidates, verified=options.verify > 0,
+        progress=self._stage, sampling=options.sampling)
+    try:
+      reg, f1, f2 = run(levels)
+    except ValueError as err:   # ISS keypoints that leave RANSAC nothing to sample
+      if options.keypoints != 'iss':
+        raise
+      used = [self.levels(e.points.points, 'auto', options.descriptor) for e in entries]
+      reg, f1, f2 = run(used)
+      self._say(f'{pair_name}: {err}; registered again with {len(used[0].idx)} / '
+                f'{len(used[1].idx)} farthest-point keypoints')
+      levels = levels + used
+    for stage in lazy:
+      seconds[stage] += sum(f.seconds[stage] for f in levels) - before[stage]
     level = [e.level for e in entries]
     if any(lv.turned for lv in level):   # back in the files' frames; the kept features stay
       reg = leveling.unlevel(reg, level)
       f1, f2 = (dataclasses.replace(f, xyz=lv.undo(f.xyz)) for f, lv in zip((f1, f2), level))
-    reg = _finish(reg, entries[0].own, entries[1].own, self._options,
-                  origin=-entries[0].offset, progress=self._stage)
-    reg.seconds = {**seconds, **reg.seconds}
+    if options.icp:
+      self._stage('ICP')
+      t0 = time.perf_counter()
+      reg.transform, reg.icp_fitness = pair_stages.refine_icp(
+          entries[0].own.points, entries[1].own.points, reg.transform)
+      reg.seconds['icp'] = time.perf_counter() - t0
+    reg = pair_stages.assess(reg, entries[0].own, entries[1].own, origin=-entries[0].offset)
     return reg, f1, f2
 
 
