@@ -5,7 +5,7 @@ import pytest
 
 from ssd_jax import inference, pretrained
 from ssd_jax.data import clean, groundtruth, io, kitti
-from ssd_jax.registration import free_space, metrics, pipeline, prepared, verdict
+from ssd_jax.registration import free_space, metrics, outputs, pipeline, prepared, verdict
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
 
@@ -139,4 +139,7 @@ def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
   assert metrics.registration_errors(t12, again.transform)['success']
   assert f1.descriptors.shape[1] == 33   # FPFH's 33 bins: the features of the pose kept
   assert pipeline.RETRY_NOTE.format(first.verdict.reason) in again.notes, again.notes
+  row = outputs.csv_row(pipeline.PairResult('a.bin', 'b.bin', again, f1, f1))   # a batch's
+  assert pipeline.RETRY_NOTE.format(first.verdict.reason) in row[
+      outputs.CSV_HEADER.index('notes')]
   assert again.seconds['ransac'] > first.seconds['ransac']   # both tries are counted

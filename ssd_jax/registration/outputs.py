@@ -22,7 +22,7 @@ from ssd_jax.registration import options as options_lib
 CSV_HEADER = [
     'cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials', 'seconds',
     *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)], 'rte', 'rre', 'success',
-    'error', 'registered', 'verdict', 'structure_fitness', 'free_space_conflict', 'degenerate',
+    'error', 'notes', 'registered', 'verdict', 'structure_fitness', 'free_space_conflict', 'degenerate',
     'translation_constraint',
     *[f'least_fixed_translation[{i}]' for i in range(3)], 'smallest_eigenvalue',
     *[f'smallest_direction[{i}]' for i in range(6)],
@@ -35,7 +35,8 @@ REGISTERED_COLUMN = CSV_HEADER.index('registered')
 
 def csv_row(result: pipeline.PairResult, truth: np.ndarray | None = None) -> list:
   """The `CSV_HEADER` row of one pair; `truth`: its ground-truth T_12 (errors filled in).
-  The verdict (`registered` 1 / 0 and its reason) is empty where the pair failed."""
+  The verdict (`registered` 1 / 0 and its reason) is empty where the pair failed; `notes`:
+  the registration's fallbacks, '; '-joined (e.g. registered again with FPFH)."""
   reg, error = result.registration, result.error
   t = reg.transform if reg is not None and not error else np.eye(4)
   keypoints = ((len(result.target_features.xyz), len(result.source_features.xyz))
@@ -53,7 +54,8 @@ def csv_row(result: pipeline.PairResult, truth: np.ndarray | None = None) -> lis
   return [result.target, result.source, *keypoints,
           int(reg.inliers.sum()) if reg is not None else 0, reg.trials if reg is not None else 0,
           f'{result.seconds:.3f}', *t.ravel().tolist(), gt.get('rte', ''), gt.get('rre', ''),
-          gt.get('success', ''), error, *verdict, *pose,
+          gt.get('success', ''), error, '; '.join(reg.notes) if reg is not None else '',
+          *verdict, *pose,
           *[f'{stages[s]:.4f}' if s in stages else '' for s in pipeline.STAGES]]
 
 
