@@ -8,11 +8,12 @@ success on the same pairs, in every regime a user meets, in one run.
 
 Methods, each on every pair of each set (`--num_pairs`: the first N, 0 all):
 
-  * register: `python -m experiments.register` with its defaults (the shipped `ours`,
+  * register: `python -m experiments.register` with its defaults (`pretrained.DEFAULT`,
     farthest-point keypoints, 512 then 1,024 where those leave the pose in doubt, upright
-    RANSAC, its 10 best poses and the BEV search's 5 verified against the clouds), plus
-    `--register_flags` (e.g. `--keypoints=iss,--descriptor=fpfh,--verify=0,--bev=0`: the
-    paper's protocol; `--draws=1`: one sampling of each ball).
+    RANSAC, its 10 best poses and the BEV search's 5 verified against the clouds, FPFH
+    again where the verdict refuses), plus `--register_flags` (e.g.
+    `--keypoints=iss,--descriptor=fpfh,--verify=0,--bev=0`: the paper's protocol;
+    `--draws=1`: one sampling of each ball).
   * open3d, open3d_tutorial: Open3D's own ISS + FPFH + RANSAC pipeline with the paper's or
     its tutorial's normal and FPFH searches (`ssd_jax.evaluation.reference`).
   * kiss_matcher: KISS-Matcher (PyPI `kiss-matcher`, 0.3 m voxels) and Open3D's

@@ -227,12 +227,12 @@ class Registrar:
     elif self._options.retries and not reg.verdict.registered:
       again, g1, g2 = self._upright(entries, pair, dataclasses.replace(
           self._options, descriptor='fpfh'), seconds, pair_name)
-      spent = {k: reg.seconds.get(k, 0.0) + again.seconds.get(k, 0.0)
-               for k in reg.seconds | again.seconds}
+      spent = collections.Counter(reg.seconds)
+      spent.update(again.seconds)   # both tries' stages, as `any_rotation` counts them
       if again.verdict.registered:
         again.notes.append(RETRY_NOTE.format(reg.verdict.reason))
         reg, f1, f2 = again, g1, g2
-      reg.seconds = spent
+      reg.seconds = dict(spent)
     reg.seconds = {**seconds, **reg.seconds}
     return reg, f1, f2
 
