@@ -55,8 +55,8 @@ flags.DEFINE_integer('bev', DEFAULTS.bev, "Also check the bird's-eye-view search
 flags.DEFINE_list('descriptor', [DEFAULTS.descriptor], 'learned, fpfh; a list runs each.')
 flags.DEFINE_enum('level', DEFAULTS.level, options_lib.LEVELS,
                   'ground: level each tilted scan by its ground first; none: take z as up.')
-flags.DEFINE_enum('retry', DEFAULTS.retry, options_lib.RETRIES, 'fpfh: register a pose the '
-                  'verdict refuses again with FPFH (learned descriptors, --verify > 0).')
+flags.DEFINE_list('retry', list(DEFAULTS.retry), 'A pose the verdict refuses is registered '
+                  "again with each in turn: learned (the model's own sampling), fpfh; none.")
 flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: '
                     f'{pretrained.DEFAULT}, or ours_detector for learned keypoints).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding the pairs (optional).')
@@ -81,7 +81,7 @@ def _options(descriptor: str) -> options_lib.Options:
                            "about z only, and are checked with RANSAC's)")
   return options_lib.Options(FLAGS.keypoints, descriptor, FLAGS.ransac, FLAGS.verify, FLAGS.bev,
                              FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed,
-                             FLAGS.level, FLAGS.sampling, FLAGS.retry)
+                             FLAGS.level, FLAGS.sampling, ','.join(FLAGS.retry))
 
 
 def _read(path: str) -> np.ndarray:

@@ -106,6 +106,35 @@ def test_verification_aligns_only_the_candidates_that_could_win(monkeypatch):
 
 
 @pytest.mark.real_data
+def test_the_pose_verification_picks_by_another_rule_is_refined_in_full():
+  """`choose` (the pipeline picks by fitness less free-space conflict) may pick a pose that
+  was not refined in full: it is, before it is returned, as the best one is (a coarse pose
+  can stop degrees off where the full ICP reaches the truth)."""
+  scan = io.read_cloud(shared_path('kitti_object_velodyne', '000000.bin')).astype(np.float64)
+  t_true = geometry.make_transform(geometry.rotation_z(np.radians(60.0)), np.array([5.0, 2.0, 0.0]))
+  cloud2 = (scan[1::2] - t_true[:3, 3]) @ t_true[:3, :3]
+  near = t_true @ geometry.make_transform(geometry.rotation_z(np.radians(3.0)),
+                                          np.array([0.3, -0.25, 0.0]))
+  other = t_true @ geometry.make_transform(geometry.rotation_z(np.radians(4.0)),
+                                           np.array([4.0, 1.0, 0.0]))
+  target, source = verification.target(scan[::2]), verification.source(cloud2)
+  memo = {}
+  by_fitness = verification.verify(target, source, np.stack([near, other]), memo=memo)
+  assert by_fitness[0] == 0 and not np.array_equal(by_fitness[1][0], near)
+  held = by_fitness[1][1]                                  # not refined in full
+  assert ('fine', held.tobytes()) not in memo
+  picked = []
+  best, refined, fitness = verification.verify(
+      target, source, np.stack([near, other]), memo=memo,
+      choose=lambda poses, fit: picked.append(fit[1]) or 1)
+  full, _ = icp.point_to_plane(target, source.points, held, verification.ICP_DISTANCES,
+                               verification.ICP_ITERATIONS)
+  assert best == 1 and len(picked) == 2                    # picked, refined, picked again
+  np.testing.assert_array_equal(refined[1], full)
+  assert fitness[1] == verification.fitness(target, source.scored, full)
+
+
+@pytest.mark.real_data
 def test_verification_sharing_a_memo_repeats_no_icp_and_gives_the_same_result(monkeypatch):
   """RANSAC's candidates verified, then those and more with the same memo (as
   pair_stages.verify does before and after the BEV search): the second call aligns only

@@ -5,6 +5,7 @@ import pytest
 
 from ssd_jax import inference, pretrained
 from ssd_jax.data import clean, groundtruth, io, kitti
+from ssd_jax.infra import errors
 from ssd_jax.registration import free_space, metrics, outputs, pipeline, prepared, verdict
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
@@ -119,27 +120,49 @@ def test_register_returns_the_verdict_with_the_pose():
 
 @pytest.mark.real_data
 def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
-  """A learned descriptor that fails on a pair (here noise: its candidates hold no right
-  pose, and the BEV search is off) leaves a pose the verdict refuses; the retry registers
-  the pair again with FPFH at the same keypoints and keeps its pose, which is right and
+  """A learned descriptor that fails on a pair (here noise at any sampling: its candidates
+  hold no right pose, and the BEV search is off) leaves a pose the verdict refuses; the
+  retry registers the pair again, with the model's own sampling (noise again, refused)
+  and then with FPFH at the same keypoints, and keeps FPFH's pose, which is right and
   trusted, with a note saying so. Without the retry the refused pose stands."""
   cloud1, cloud2, t12 = _drive_pair(0, 7)
   monkeypatch.setattr(inference, 'describe', lambda model, points, at, **kw: (
       np.random.default_rng(len(points)).normal(size=(len(at), 32)).astype(np.float32)))
   model = pretrained.load(pretrained.DEFAULT)
   registered = {}
-  for retry in options_lib.RETRIES:
+  for retry in ('none', 'fpfh', options_lib.Options().retry):
     registered[retry], f1, _ = pipeline.register(
         target=cloud1, source=cloud2, model=model,
         options=options_lib.Options(bev=0, retry=retry))
-  first, again = registered['none'], registered['fpfh']
+  first, again, both = registered['none'], registered['fpfh'], registered[options_lib.RETRIES]
   assert not first.verdict.registered, first.verdict
   assert not metrics.registration_errors(t12, first.transform)['success']
   assert again.verdict.registered, again.verdict
   assert metrics.registration_errors(t12, again.transform)['success']
   assert f1.descriptors.shape[1] == 33   # FPFH's 33 bins: the features of the pose kept
-  assert pipeline.RETRY_NOTE.format(first.verdict.reason) in again.notes, again.notes
+  note = pipeline.RETRY_NOTES['fpfh'].format(first.verdict.reason)
+  assert note in again.notes and note in both.notes, (again.notes, both.notes)
+  np.testing.assert_array_equal(both.transform, again.transform)
   row = outputs.csv_row(pipeline.PairResult('a.bin', 'b.bin', again, f1, f1))   # a batch's
-  assert pipeline.RETRY_NOTE.format(first.verdict.reason) in row[
-      outputs.CSV_HEADER.index('notes')]
-  assert again.seconds['ransac'] > first.seconds['ransac']   # both tries are counted
+  assert note in row[outputs.CSV_HEADER.index('notes')]
+
+
+@pytest.mark.real_data
+def test_a_refused_pose_is_registered_again_with_the_models_own_sampling(monkeypatch):
+  """Where the first try's sampling of each ball (one of 32 points) fails on a pair (here
+  noise in its place), the retry describes the clouds as the model was trained (its own
+  draws of 64 points) and keeps that pose, right and trusted, before FPFH is tried."""
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  describe = inference.describe
+  monkeypatch.setattr(inference, 'describe', lambda model, points, at, **kw: (
+      np.random.default_rng(len(points)).normal(size=(len(at), 32)).astype(np.float32)
+      if model.draws == options_lib.VERIFIED_DRAWS else describe(model, points, at, **kw)))
+  model = pretrained.load(pretrained.DEFAULT)
+  assert model.draws != options_lib.VERIFIED_DRAWS
+  reg, _, _ = pipeline.register(target=cloud1, source=cloud2, model=model,
+                                options=options_lib.Options(bev=0))
+  assert reg.verdict.registered and metrics.registration_errors(t12, reg.transform)['success']
+  assert any(n.startswith(pipeline.RETRY_NOTES['learned'].split('{')[0]) for n in reg.notes)
+  assert not any('FPFH' in n for n in reg.notes), reg.notes
+  with pytest.raises(errors.UserError, match='retry'):
+    options_lib.Options(retry='learned,sift')

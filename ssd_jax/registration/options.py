@@ -28,11 +28,13 @@ ESTIMATORS = ('rigid', 'upright')
 SAMPLINGS = ('auto', 'compatible', 'uniform')
 # Whether each scan is first turned level by its ground (`Options.level`, `leveling`).
 LEVELS = ('none', 'ground')
-# What registers a pair again whose learned descriptors' pose the verdict refuses: 'fpfh',
-# the classical descriptor at the same keypoints, its pose kept where the verdict trusts
-# it; 'none'. Two descriptors that fail on different pairs: where the learned one's
-# candidates hold no right pose, FPFH's sometimes do (docs/notes/real_drives.md).
-RETRIES = ('none', 'fpfh')
+# What registers a pair again whose learned descriptors' pose the verdict refuses, in turn
+# until the verdict trusts a pose: 'learned', the learned descriptors sampled as the model
+# was trained (its own draws of its own points, where the first try sampled fewer:
+# `describing`); 'fpfh', the classical descriptor at the same keypoints. Descriptors that
+# fail on different pairs: where one's candidates hold no right pose, another's sometimes
+# do (docs/notes/real_drives.md).
+RETRIES = ('learned', 'fpfh')
 
 
 # How the learned descriptor samples each ball where the candidate poses are verified
@@ -90,9 +92,9 @@ class Options:
               RANSAC over any rotation, and notes say which) or
               'none' (the clouds as given: z is taken to be up). `register_many` levels
               each cloud once.
-  retry       RETRIES: 'fpfh' (with learned descriptors and verify > 0, a pose the
-              verdict refuses is registered again with FPFH, kept where trusted) or
-              'none'.
+  retry       RETRIES in turn (a tuple, or names joined by commas; () or 'none': no
+              retry): with learned descriptors and verify > 0, a pose the verdict
+              refuses is registered again with each until one is trusted (`retries`).
   """
   keypoints: str = 'auto'
   descriptor: str = 'learned'
@@ -106,14 +108,20 @@ class Options:
   seed: int = 0
   level: str = 'ground'
   sampling: str = 'auto'
-  retry: str = 'fpfh'
+  retry: tuple[str, ...] = RETRIES
 
   def __post_init__(self):
+    if isinstance(self.retry, str):
+      names = () if self.retry in ('', 'none') else tuple(self.retry.split(','))
+      object.__setattr__(self, 'retry', names)
     for name, allowed in (('keypoints', KEYPOINTS), ('descriptor', DESCRIPTORS),
                           ('estimator', ESTIMATORS), ('level', LEVELS),
-                          ('sampling', SAMPLINGS), ('retry', RETRIES)):
+                          ('sampling', SAMPLINGS)):
       if getattr(self, name) not in allowed:
         raise errors.UserError(f'{name} must be one of {allowed}, got {getattr(self, name)!r}')
+    if not set(self.retry) <= set(RETRIES) or len(set(self.retry)) < len(self.retry):
+      raise errors.UserError(f"retry must name each of {RETRIES} at most once (or 'none'), "
+                             f'got {",".join(self.retry)!r}')
     for name, meaning in (('verify', '0: no verification'), ('bev', '0: no BEV search'),
                           ('fpfh_max_nn', '0: no cap'), ('draws', "0: the model's own"),
                           ('voxel', '0: every point as given')):
@@ -127,7 +135,7 @@ class Options:
     the clouds as given."""
     return cls(**{'keypoints': 'iss', 'descriptor': descriptor, 'estimator': 'rigid',
                   'verify': 0, 'bev': 0, 'level': 'none', 'sampling': 'uniform',
-                  'retry': 'none', **overrides})
+                  'retry': (), **overrides})
 
   @property
   def bev_candidates(self) -> int:
@@ -136,9 +144,13 @@ class Options:
     return self.bev if self.estimator == 'upright' and self.verify > 0 else 0
 
   @property
-  def retries(self) -> bool:
-    """Whether a refused pose is registered again with FPFH (`retry`)."""
-    return self.retry == 'fpfh' and self.descriptor == 'learned' and self.verify > 0
+  def retries(self) -> tuple[str, ...]:
+    """The tries of `retry` that apply: none unless the descriptor is learned and the
+    poses verified; 'learned' only where the first try samples fewer than the model's own
+    (`draws` None)."""
+    if self.descriptor != 'learned' or self.verify == 0:
+      return ()
+    return tuple(r for r in self.retry if r != 'learned' or self.draws is None)
 
   @property
   def needs_model(self) -> bool:

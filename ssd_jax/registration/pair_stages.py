@@ -132,8 +132,11 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
   # With the BEV search to follow, RANSAC's candidates alone only decide whether it runs
   # (a confident pose), and the call with both refines what wins: none is refined in full
   # here unless it could be confident (`confident_only`).
+  # Among them, the one that also leaves each scan's empty space empty (`free_space.best`).
+  choose = lambda poses, fit: free_space.best(fit, lambda c: pair.conflict(poses[c]))
   best, refined, fitness = verification.verify(target, source, candidates, memo=pair.memo,
-                                               confident_only=confident_only or bev_candidates > 0)
+                                               confident_only=confident_only or bev_candidates > 0,
+                                               choose=choose)
   seconds = {**reg.seconds, 'verify': time.perf_counter() - t0}
   if bev_candidates > 0:
     seconds['bev'] = 0.0
@@ -142,11 +145,9 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
       candidates = np.concatenate([candidates, pair.bev_poses(bev_candidates)])
       t2 = time.perf_counter()
       best, refined, fitness = verification.verify(target, source, candidates,
-                                                   memo=pair.memo)
+                                                   memo=pair.memo, choose=choose)
       seconds['bev'] = t2 - t1
       seconds['verify'] += time.perf_counter() - t2
-  # Among them, the one that also leaves each scan's empty space empty (`free_space.best`).
-  best = free_space.best(fitness, lambda c: pair.conflict(refined[c]))
   xyz1 = f1.xyz[reg.matches[:, 0]].astype(np.float64)
   xyz2 = f2.xyz[reg.matches[:, 1]].astype(np.float64)
   inliers, stats = _match_stats(xyz1, xyz2, refined[best], inlier_threshold)

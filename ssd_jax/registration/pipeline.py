@@ -29,8 +29,14 @@ Features = cloud_features.CloudFeatures
 # other pair's. Otherwise nothing may assume z is up: FPFH and RANSAC over any rotation.
 UPRIGHT_NOTE = 'registered as given (z up): its verified pose is clear'
 ANY_ROTATION_NOTE = 'registered with FPFH and RANSAC over any rotation'
-# A pose the verdict refuses is registered again with FPFH (`Options.retry`).
-RETRY_NOTE = "registered again with FPFH descriptors, the learned ones' pose refused ({})"
+# A pose the verdict refuses is registered again (`Options.retry`), noted as one of these
+# with the first pose's reason.
+RETRY_NOTES = {'learned': 'registered again with the learned descriptors sampled as the '
+                          'model was trained, the first pose refused ({})',
+               'fpfh': "registered again with FPFH descriptors, the learned ones' pose "
+                       'refused ({})'}
+# The features of a retry with the learned descriptors, as `_Cloud.features` keeps them.
+OWN_SAMPLING = 'learned, own sampling'
 
 
 def _settled(reg: pair_stages.Registration) -> bool:
@@ -89,8 +95,8 @@ class PairResult:
 @dataclasses.dataclass
 class _Cloud:
   points: prepared.PreparedCloud   # on the grid, centred (`offset`), levelled (`Options.level`)
-  # descriptor -> keypoints and descriptors of `points` (the options' own; 'fpfh' once a
-  # pair is registered again, `Options.retry`)
+  # descriptor -> keypoints and descriptors of `points` (the options' own; OWN_SAMPLING and
+  # 'fpfh' once a pair is registered again, `Options.retry`)
   features: dict[str, cloud_features.FeatureLevels]
   seconds: dict                    # read, grid, level and its first level's features, once
   level: leveling.Leveling         # how `points` was levelled
@@ -113,19 +119,27 @@ class Registrar:
                cache_size: int = CACHE_SIZE, progress: Callable[[str], None] | None = None):
     self._options = options_lib.Options() if options is None else options
     self._read, self._model, self._say = read, self._options.describing(model), say
+    # The tries after the first where the verdict refuses (`Options.retries`): (features
+    # key, options, model); the learned one only where the first sampled fewer.
+    self._retries = [('fpfh', dataclasses.replace(self._options, descriptor='fpfh'), None)
+                     if name == 'fpfh' else (OWN_SAMPLING, self._options, model)
+                     for name in self._options.retries
+                     if name == 'fpfh' or (model.draws, model.num_samples)
+                     != (self._model.draws, self._model.num_samples)]
     self._stage = (lambda name: None) if progress is None else progress
     self.voxel = (cloud_features.voxel_size_of(self._model) if self._options.voxel is None
                   else self._options.voxel)   # metres: the grid every cloud is put on
     self._kept: dict[str, _Cloud] = {}
     self._size = cache_size
 
-  def levels(self, points: np.ndarray, keypoints: str, descriptor: str | None = None
-             ) -> cloud_features.FeatureLevels:
+  def levels(self, points: np.ndarray, keypoints: str, descriptor: str | None = None,
+             model=None) -> cloud_features.FeatureLevels:
     """The `FeatureLevels` of points [N, 3] (on the grid, levelled) with these options'
-    descriptor, or `descriptor` ('fpfh': no model)."""
+    descriptor, or `descriptor` ('fpfh': no model; 'learned': `model`, default the
+    options' own)."""
     o = self._options
     descriptor = descriptor or o.descriptor
-    model = self._model if descriptor == 'learned' else None
+    model = (model or self._model) if descriptor == 'learned' else None
     coarse = cloud_features.coarse_keypoints(o.verify > 0)
     return cloud_features.feature_levels(points, keypoints, descriptor, model, o.seed,
                                          o.fpfh_max_nn, coarse)
@@ -224,31 +238,36 @@ class Registrar:
       if not _settled(reg):
         return any_rotation(reg.seconds)
       reg.notes.append(UPRIGHT_NOTE)
-    elif self._options.retries and not reg.verdict.registered:
-      again, g1, g2 = self._upright(entries, pair, dataclasses.replace(
-          self._options, descriptor='fpfh'), seconds, pair_name)
-      spent = collections.Counter(reg.seconds)
-      spent.update(again.seconds)   # both tries' stages, as `any_rotation` counts them
-      if again.verdict.registered:
-        again.notes.append(RETRY_NOTE.format(reg.verdict.reason))
-        reg, f1, f2 = again, g1, g2
+    elif self._retries and not reg.verdict.registered:
+      spent = collections.Counter(reg.seconds)   # every try's stages, as `any_rotation`'s
+      for key, options, model in self._retries:
+        again, g1, g2 = self._upright(entries, pair, options, seconds, pair_name, key, model)
+        spent.update(again.seconds)
+        if again.verdict.registered:
+          name = 'learned' if key == OWN_SAMPLING else key
+          again.notes.append(RETRY_NOTES[name].format(reg.verdict.reason))
+          reg, f1, f2 = again, g1, g2
+          break
       reg.seconds = dict(spent)
     reg.seconds = {**seconds, **reg.seconds}
     return reg, f1, f2
 
   def _upright(self, entries: list[_Cloud], pair: prepared.PreparedPair,
-               options: options_lib.Options, seconds: dict, pair_name: str
+               options: options_lib.Options, seconds: dict, pair_name: str,
+               key: str | None = None, model=None
                ) -> tuple[pair_stages.Registration, Features, Features]:
     """The pair (`pair`: its levelled clouds) registered upright with `options`'
-    descriptor (the clouds' kept levels, made the first time a descriptor is asked for;
+    descriptor (a learned one with `model`, default the options' own; the clouds' levels
+    kept under `key`, default the descriptor, made the first time they are asked for;
     ISS keypoints RANSAC cannot sample fall back to farthest-point ones), back in the
     clouds' frames, ICP (`Options.icp`) and `assess`. The levels' keypoint and descriptor
     seconds go to `seconds`."""
+    key = key or options.descriptor
     for e in entries:
-      if options.descriptor not in e.features:
-        e.features[options.descriptor] = self.levels(e.points.points, options.keypoints,
-                                                     options.descriptor)
-    levels = [e.features[options.descriptor] for e in entries]
+      if key not in e.features:
+        e.features[key] = self.levels(e.points.points, options.keypoints, options.descriptor,
+                                      model)
+    levels = [e.features[key] for e in entries]
     lazy = ('keypoints', 'descriptors')   # what the clouds' levels have cost until now
     before = {stage: sum(f.seconds[stage] for f in levels) for stage in lazy}
     run = lambda pair_levels: pair_stages.coarse_to_fine(
@@ -261,7 +280,7 @@ class Registrar:
     except ValueError as err:   # ISS keypoints that leave RANSAC nothing to sample
       if options.keypoints != 'iss':
         raise
-      used = [self.levels(e.points.points, 'auto', options.descriptor) for e in entries]
+      used = [self.levels(e.points.points, 'auto', options.descriptor, model) for e in entries]
       reg, f1, f2 = run(used)
       self._say(f'{pair_name}: {err}; registered again with {len(used[0].idx)} / '
                 f'{len(used[1].idx)} farthest-point keypoints')

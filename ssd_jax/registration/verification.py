@@ -14,6 +14,7 @@ matches, picks the pose: the check of a classic registration pipeline's verifica
 from __future__ import annotations
 
 import dataclasses
+from typing import Callable
 
 import numpy as np
 
@@ -144,7 +145,8 @@ def _close(a: np.ndarray, b: np.ndarray, limits: tuple[float, float]) -> bool:
 
 
 def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
-           memo: dict | None = None, confident_only: bool = False
+           memo: dict | None = None, confident_only: bool = False,
+           choose: Callable[[np.ndarray, np.ndarray], int] | None = None
            ) -> tuple[int, np.ndarray, np.ndarray]:
   """Candidate poses T_12 [k, 4, 4] of cloud 2 in cloud 1 (points [N, 3] metres near the
   origin, z up, or their `target` and `source`) -> (index of the best, each candidate
@@ -158,7 +160,10 @@ def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
   pair of clouds (e.g. RANSAC's candidates, then those and the BEV search's), in which
   each ICP and fitness is kept under its start pose, so that no call repeats one. With
   `confident_only`, where no coarse-aligned candidate fits within UNREFINED_MARGIN of
-  CONFIDENT_FITNESS, none is refined in full (each keeps its coarse pose and fitness)."""
+  CONFIDENT_FITNESS, none is refined in full (each keeps its coarse pose and fitness).
+  `choose(poses [k, 4, 4], fitness [k]) -> index` picks the answer (default: the best
+  fitness, e.g. `free_space.best` instead); whichever it picks is refined in full, and
+  picked again from there."""
   tgt = points1 if isinstance(points1, icp.Surface) else target(points1)
   if isinstance(points2, Source):
     if score_on != SCORE_ON:
@@ -209,7 +214,9 @@ def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
   for c in ransac.distinct_best(refined, scores, FINE_CANDIDATES, SAME_START):
     if scores[c] >= scores.max() - FINE_MARGIN and c not in fine:
       refine(c)
-  # The answer is refined in full: a coarse-only pose that scores best is refined too.
-  while (best := int(np.argmax(scores))) not in fine:
+  # The answer is refined in full: a coarse-only pose that is picked is refined too (a
+  # coarse ICP can stop a few degrees off where the full one reaches the pose).
+  choose = (lambda poses, fit: int(np.argmax(fit))) if choose is None else choose
+  while (best := choose(refined, scores)) not in fine:
     refine(best)
   return best, refined, scores
