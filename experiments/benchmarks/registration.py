@@ -10,8 +10,8 @@ Methods, each on every pair of each set (`--num_pairs`: the first N, 0 all):
 
   * register: `python -m experiments.register` with its defaults (`pretrained.DEFAULT`,
     farthest-point keypoints, 512 then 1,024 where those leave the pose in doubt, upright
-    RANSAC, its 10 best poses and the BEV search's 5 verified against the clouds, FPFH
-    again where the verdict refuses), plus `--register_flags` (e.g.
+    RANSAC, its 10 best poses and the BEV search's 5 verified against the clouds, again
+    where the verdict refuses), plus `--register_flags` (e.g.
     `--keypoints=iss,--descriptor=fpfh,--verify=0,--bev=0`: the paper's protocol;
     `--draws=1`: one sampling of each ball).
   * open3d, open3d_tutorial: Open3D's own ISS + FPFH + RANSAC pipeline with the paper's or
