@@ -145,6 +145,7 @@ def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
   np.testing.assert_array_equal(both.transform, again.transform)
   row = outputs.csv_row(pipeline.PairResult('a.bin', 'b.bin', again, f1, f1))   # a batch's
   assert note in row[outputs.CSV_HEADER.index('notes')]
+  assert again.seconds['ransac'] > first.seconds['ransac']   # both tries are counted
 
 
 @pytest.mark.real_data
@@ -164,5 +165,8 @@ def test_a_refused_pose_is_registered_again_with_the_models_own_sampling(monkeyp
   assert reg.verdict.registered and metrics.registration_errors(t12, reg.transform)['success']
   assert any(n.startswith(pipeline.RETRY_NOTES['learned'].split('{')[0]) for n in reg.notes)
   assert not any('FPFH' in n for n in reg.notes), reg.notes
+  # where the first try already describes as the model was trained, only FPFH is left
+  own = pipeline.Registrar(lambda key: cloud1, model=model, options=options_lib.Options(draws=0))
+  assert list(own._retries) == ['fpfh']   # pylint: disable=protected-access
   with pytest.raises(errors.UserError, match='retry'):
     options_lib.Options(retry='learned,sift')

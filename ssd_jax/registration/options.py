@@ -146,11 +146,9 @@ class Options:
   @property
   def retries(self) -> tuple[str, ...]:
     """The tries of `retry` that apply: none unless the descriptor is learned and the
-    poses verified; 'learned' only where the first try samples fewer than the model's own
-    (`draws` None)."""
-    if self.descriptor != 'learned' or self.verify == 0:
-      return ()
-    return tuple(r for r in self.retry if r != 'learned' or self.draws is None)
+    poses verified (`pipeline.Registrar` skips 'learned' where the first try already
+    samples as the model was trained)."""
+    return self.retry if self.descriptor == 'learned' and self.verify > 0 else ()
 
   @property
   def needs_model(self) -> bool:

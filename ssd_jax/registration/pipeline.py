@@ -119,13 +119,14 @@ class Registrar:
                cache_size: int = CACHE_SIZE, progress: Callable[[str], None] | None = None):
     self._options = options_lib.Options() if options is None else options
     self._read, self._model, self._say = read, self._options.describing(model), say
-    # The tries after the first where the verdict refuses (`Options.retries`): (features
-    # key, options, model); the learned one only where the first sampled fewer.
-    self._retries = [('fpfh', dataclasses.replace(self._options, descriptor='fpfh'), None)
-                     if name == 'fpfh' else (OWN_SAMPLING, self._options, model)
-                     for name in self._options.retries
-                     if name == 'fpfh' or (model.draws, model.num_samples)
-                     != (self._model.draws, self._model.num_samples)]
+    # The tries after the first where the verdict refuses (`Options.retries`): name ->
+    # (features key, options, model); the learned one only where the first try samples
+    # each ball otherwise than the model was trained.
+    tries = {'fpfh': ('fpfh', dataclasses.replace(self._options, descriptor='fpfh'), None),
+             'learned': (OWN_SAMPLING, self._options, model)}
+    sampling = lambda m: (m.draws, m.num_samples)
+    self._retries = {name: tries[name] for name in self._options.retries
+                     if name == 'fpfh' or sampling(model) != sampling(self._model)}
     self._stage = (lambda name: None) if progress is None else progress
     self.voxel = (cloud_features.voxel_size_of(self._model) if self._options.voxel is None
                   else self._options.voxel)   # metres: the grid every cloud is put on
@@ -240,11 +241,10 @@ class Registrar:
       reg.notes.append(UPRIGHT_NOTE)
     elif self._retries and not reg.verdict.registered:
       spent = collections.Counter(reg.seconds)   # every try's stages, as `any_rotation`'s
-      for key, options, model in self._retries:
+      for name, (key, options, model) in self._retries.items():
         again, g1, g2 = self._upright(entries, pair, options, seconds, pair_name, key, model)
         spent.update(again.seconds)
         if again.verdict.registered:
-          name = 'learned' if key == OWN_SAMPLING else key
           again.notes.append(RETRY_NOTES[name].format(reg.verdict.reason))
           reg, f1, f2 = again, g1, g2
           break
