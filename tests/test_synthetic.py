@@ -1,4 +1,4 @@
-"""Synthetic data: determinism, exact ground truth, layouts, realism helpers, baseline."""
+"""Synthetic data: determinism, exact ground truth, layouts, baseline."""
 
 import filecmp
 import json
@@ -13,8 +13,8 @@ from scipy import spatial
 
 from ssd_jax import geometry
 from ssd_jax.data import datasets, groundtruth, io
-from ssd_jax.synthetic import dataset, lidar, pushbroom, realism, scene as scene_lib
-from tests.conftest import shared_path, tiny_synthetic_config as tiny_config
+from ssd_jax.synthetic import dataset, lidar, pushbroom, scene as scene_lib
+from tests.conftest import tiny_synthetic_config as tiny_config
 
 ROOT_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -290,70 +290,6 @@ def test_lidar_on_flat_ground_matches_geometry():
   assert r.min() >= model.min_range and r.max() <= model.max_range
 
 
-def test_realism_statistics_on_constructed_scene():
-  rng = np.random.default_rng(0)
-  ground = np.c_[rng.uniform(-10, 10, (20000, 2)), rng.normal(-1.7, 0.01, 20000)]
-  wall = np.c_[rng.uniform(-10, 10, 2000), np.full(2000, 8.0), rng.uniform(-1.7, 3, 2000)]
-  pts = np.concatenate([ground, wall])
-  frac = realism.ground_mask(pts).mean()
-  assert 0.90 <= frac <= 0.93   # 20,000 ground + the wall's lowest 0.25 m (~5 % of 2,000)
-  feats = realism.shape_features(ground, rng, num_samples=300)
-  assert np.median(feats['planarity']) > 0.7 and np.median(feats['scattering']) < 0.01
-  pole = np.c_[rng.normal(0, 0.02, (500, 2)), rng.uniform(0, 5, 500)]
-  assert np.median(realism.shape_features(pole, rng, num_samples=100)['linearity']) > 0.9
-  hist = realism.range_histogram(np.array([[1.0, 0, 0], [7.0, 0, 0], [30.0, 0, 0], [90, 0, 0]]))
-  np.testing.assert_allclose(hist, [0.25, 0.25, 0, 0.25, 0, 0.25])
-  front = realism.front_fov(np.array([[10.0, 0, 0], [-10.0, 0, 0], [10, 10, 0], [10, 0, -5]]))
-  np.testing.assert_allclose(front, [[10.0, 0, 0]])
-
-
-def test_model_statistics_of_a_known_plane():
-  g = np.arange(-20.0, 20.0, 0.2)
-  xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
-  plane = np.c_[xy, np.zeros(len(xy)), np.zeros((len(xy), 2)), np.ones(len(xy))]
-  stats = realism.model_statistics([plane], num_samples=300)
-  assert stats['points per model'] == len(plane)
-  assert stats['spacing median (m)'] == pytest.approx(0.2, abs=1e-6)
-  # pi r^2 / 0.04 m^2 grid points in a 2 m ball, fewer for probes near the edge.
-  assert 0.8 * np.pi * 4 / 0.04 < stats['points within 2 m (median)'] < 1.05 * np.pi * 4 / 0.04
-  assert stats['normals with abs(n_z) > 0.9'] == 1.0 and stats['normals with abs(n_z) < 0.3'] == 0.0
-  assert stats['planarity median'] > 0.9 and stats['height p5-p95 (m)'] == 0.0
-
-
-@pytest.mark.real_data
-def test_oxford_realism_table_beside_the_real_models(synthetic_root):
-  real = shared_path()
-  md, stats = realism.compare_oxford_with_real(str(synthetic_root), str(real))
-  models = list((synthetic_root / 'test_oxford' / 'test_models').glob('*.bin'))
-  synthetic = stats['synthetic (mean over models)']
-  assert synthetic['models'] == len(models) and synthetic['points per model'] == 4096
-  real_cols = [k for k in stats if k.startswith('real oxford_')]
-  assert len(real_cols) == len(list((real / 'example').glob('oxford_*.bin'))) >= 1
-  for col in real_cols:   # RobotCar's models: 16,384 points on a 0.2 m grid within 30 m
-    assert stats[col]['points per model'] == 16384
-    assert 0.15 < stats[col]['spacing median (m)'] < 0.25
-    assert 25.0 < stats[col]['horizontal extent p95 (m)'] < 30.0
-  for s in stats.values():
-    assert 0 <= s['normals with abs(n_z) > 0.9'] + s['normals with abs(n_z) < 0.3'] <= 1
-  assert len(md.splitlines()) == 2 + len(synthetic)
-
-
-@pytest.mark.real_data
-def test_realism_table_puts_synthetic_and_real_scans_side_by_side(synthetic_root):
-  real = shared_path()
-  md, stats = realism.compare_with_real(str(synthetic_root), str(real), stride=2)
-  written = sorted((synthetic_root / 'test_kitti' / '00').glob('*.bin'))
-  assert stats['synthetic processed (0.2 m voxels)']['scans'] == len(written[::2])
-  assert stats['synthetic raw (front crop)']['scans'] == len(written[::2])
-  assert stats['real KITTI raw (front crop)']['scans'] == len(
-      list((real / 'kitti_object_velodyne').glob('*.bin')))
-  # Each processed scan is counted as written: the mean of the files' point counts.
-  counts = [len(io.read_cloud(f)) for f in written[::2]]
-  assert stats['synthetic processed (0.2 m voxels)']['points per scan'] == pytest.approx(
-      np.mean(counts))
-  assert len(md.splitlines()) == 2 + len(stats['synthetic raw (front crop)'])
-
-
 def test_pushbroom_lines_on_a_known_street():
   """Ground z = 0 and a wall at y = 5 m, a perfect line scanner 2 m up driven along x:
   one line of returns per pose, across the street, each ray where geometry puts it."""
@@ -401,27 +337,3 @@ def test_pushbroom_lines_on_a_known_street():
       sensor(glass_dropout=1.0)
     with pytest.raises(ValueError, match='range_noise must be >= 0, got -0.1'):
       sensor(range_noise=-0.1)
-
-
-@pytest.mark.real_data
-@pytest.mark.multiprocess
-@pytest.mark.slow
-def test_synthetic_report_covers_both_test_splits(synthetic_root, tmp_path):
-  real = shared_path()
-  out = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.synthetic_report',
-                        f'--data={synthetic_root}', f'--real={real}', '--max_pairs=2',
-                        '--fpfh_max_nn=100', f'--out={tmp_path / "r.md"}'],
-                       capture_output=True, text=True, cwd=ROOT_DIR)
-  assert out.returncode == 0, out.stderr[-2000:]
-  report = (tmp_path / 'r.md').read_text()
-  for heading in ('Synthetic vs real KITTI scans', 'Synthetic vs real Oxford RobotCar test models',
-                  'Baselines on the synthetic Oxford-style pairs'):
-    assert heading in report
-  stats = json.loads((tmp_path / 'r.json').read_text())
-  assert set(stats['baseline_oxford']) == {'iss+fpfh', 'open3d_paper', 'open3d_tutorial'}
-  assert all(v['pairs'] == 2 for v in stats['baseline_oxford'].values())
-  assert len(stats['pairs_oxford']['open3d_paper']) == 2
-  out = subprocess.run([sys.executable, '-m', 'experiments.diagnostics.synthetic_report',
-                        f'--data={tmp_path}'], capture_output=True, text=True, cwd=ROOT_DIR)
-  assert out.returncode == 1 and 'is not a synthetic dataset' in out.stderr
-  assert 'Traceback' not in out.stderr

@@ -71,7 +71,8 @@ def test_each_reason_of_the_verdict():
   cases = {'degenerate': dict(fitness=0.9, conflict=0.0, free='translation along x'),
            'free-space conflict': dict(fitness=0.9, conflict=0.3),
            'low overlap': dict(fitness=0.1, conflict=0.0),
-           'ambiguous candidates': dict(fitness=0.4, conflict=0.0, runner_up=0.38)}
+           'ambiguous candidates': dict(fitness=0.4, conflict=0.0, runner_up=0.38),
+           'unsupported': dict(fitness=0.2, conflict=0.0, support=1)}
   for kind, kwargs in cases.items():
     v = verdict.judge(**kwargs)
     assert not v.registered and v.kind == kind and v.reason.startswith(kind + ': '), v
@@ -79,6 +80,9 @@ def test_each_reason_of_the_verdict():
   # Not judged for free space (None): the other reasons alone.
   assert verdict.judge(0.6, None).registered
   assert verdict.judge(0.6, 0.02, runner_up=0.5).registered   # a runner-up clearly behind
+  # One RANSAC sample's matches support a pose; so does a fit the geometry alone vouches for.
+  assert verdict.judge(0.2, 0.0, support=verdict.MIN_SUPPORT).registered
+  assert verdict.judge(verdict.SUPPORTED_FITNESS, 0.0, support=0).registered
   assert set(verdict.REASONS) == set(cases)
   assert verdict.judge(0.6, 0.02).to_json() == {
       'registered': True, 'reason': '', 'fitness': 0.6, 'free_space_conflict': 0.02,

@@ -9,8 +9,7 @@ Command:
 4 streets, each driven down and back by an LMS-151-like line scanner; a 60 m submap
 every 10 m of each pass, in the frame the vehicle reported at its centre line, 16,384
 points, randomly turned about z (~120 models, ~230 pairs). Only this test set is
-written. Used by experiments.learning_curve as `--set=oxford_full=data_cache/synthetic_oxford/test_oxford`
-and by `experiments.diagnostics.synthetic_report --data=data_cache/synthetic_oxford`.
+written. Used by experiments.learning_curve as `--set=oxford_full=data_cache/synthetic_oxford/test_oxford`.
 """
 
 from ssd_jax.configs.data import synthetic

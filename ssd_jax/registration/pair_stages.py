@@ -211,7 +211,8 @@ def assess(reg: Registration, points1, points2=None, origin: np.ndarray | None =
                                     reg.verified_poses, reg.verified_fitness, origin)
   judged = verdict_lib.assess(pair, reg.transform, assessed.free, reg.verified_poses,
                               reg.verified_fitness,
-                              judge_free_space=origin is None or not np.any(origin))
+                              judge_free_space=origin is None or not np.any(origin),
+                              support=int(reg.inliers.sum()))
   return dataclasses.replace(reg, uncertainty=assessed, verdict=judged,
                              seconds={**reg.seconds, 'assess': time.perf_counter() - t0})
 

@@ -3,7 +3,7 @@
 Every registration returns a pose; many real pairs (scans far apart, half overlapping, a
 solid-state unit facing elsewhere) have no right one to find, and a wrong pose looks like
 a right one by its fitness alone: the ground fits every upright pose. The verdict reads
-four things of the final pose, each a reason to refuse it:
+five things of the final pose, each a reason to refuse it:
 
   * 'degenerate': the scans leave part of the pose free (a corridor, a tunnel:
     `uncertainty.PoseUncertainty.free`);
@@ -14,7 +14,10 @@ four things of the final pose, each a reason to refuse it:
   * 'low overlap': under MIN_FITNESS of cloud 2's structure lies within
     `verification.FIT_DISTANCE` of cloud 1: too little is shared for the pose to rest on;
   * 'ambiguous candidates': a distinct pose (`ransac.CANDIDATE_SEPARATION` away) that also
-    passes the free-space check fits within AMBIGUOUS_MARGIN of the best.
+    passes the free-space check fits within AMBIGUOUS_MARGIN of the best;
+  * 'unsupported': fewer of the descriptor matches than one RANSAC sample (MIN_SUPPORT)
+    agree with the pose (it came from the bird's-eye-view search or an ICP's slide), and
+    the geometry alone is not conclusive either (under SUPPORTED_FITNESS).
 
 Thresholds are round numbers between the right and the wrong poses' values on the
 development drives (docs/notes/real_drives.md: the verdict, with its precision and recall);
@@ -34,7 +37,13 @@ MAX_CONFLICT = 0.1
 # Right poses 20-30 m apart on a real road lay 0.16-0.17 of cloud 2's structure on cloud 1.
 MIN_FITNESS = 0.15
 AMBIGUOUS_MARGIN = 0.05
-REASONS = ('degenerate', 'free-space conflict', 'low overlap', 'ambiguous candidates')
+# Matches within the inlier threshold under the pose: an upright RANSAC sample is 2. Right
+# poses so unsupported on the development drives fit >= 0.51 (far pairs of a coarse-posed
+# drive), wrong ones <= 0.21 (a hand-held Livox unit's pairs 17-28 m apart).
+MIN_SUPPORT = 2
+SUPPORTED_FITNESS = 0.35
+REASONS = ('degenerate', 'free-space conflict', 'low overlap', 'ambiguous candidates',
+           'unsupported')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,11 +73,12 @@ class Verdict:
 
 
 def judge(fitness: float, conflict: float | None, free: str = '',
-          runner_up: float | None = None) -> Verdict:
+          runner_up: float | None = None, support: int | None = None) -> Verdict:
   """The `Verdict` on a pose from what was measured at it: fitness, conflict (None where
   free space was not judged), free (the uncertainty's line, '' where the scans fix the
-  pose) and runner_up (the fitness of the best distinct candidate that passes the
-  free-space check, None where there is none)."""
+  pose), runner_up (the fitness of the best distinct candidate that passes the
+  free-space check, None where there is none) and support (the descriptor matches the
+  pose explains, None where not counted)."""
   reason = ''
   if free:
     reason = f'degenerate: {free}'
@@ -81,15 +91,18 @@ def judge(fitness: float, conflict: float | None, free: str = '',
   elif runner_up is not None and runner_up >= fitness - AMBIGUOUS_MARGIN:
     reason = (f'ambiguous candidates: a distinct pose fits {runner_up:.2f} against the '
               f'chosen {fitness:.2f}')
+  elif support is not None and support < MIN_SUPPORT and fitness < SUPPORTED_FITNESS:
+    reason = (f'unsupported: {support} of the descriptor matches agree with the pose, which '
+              f"lays {fitness:.0%} of cloud 2's structure on cloud 1")
   return Verdict(not reason, reason, float(fitness), conflict, runner_up)
 
 
 def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
            candidates: np.ndarray | None = None,
-           candidate_fitness: np.ndarray | None = None, judge_free_space: bool = True
-           ) -> Verdict:
-  """The `Verdict` on T_12 [4, 4] of the clouds of `pair` (in their own frames); free as
-  for `judge`; candidates [k, 4, 4] with their fitness [k]: the verification's poses
+           candidate_fitness: np.ndarray | None = None, judge_free_space: bool = True,
+           support: int | None = None) -> Verdict:
+  """The `Verdict` on T_12 [4, 4] of the clouds of `pair` (in their own frames); free and
+  support as for `judge`; candidates [k, 4, 4] with their fitness [k]: the verification's poses
   (`verification.verify`), of which only those distinct from T_12 that fit within
   AMBIGUOUS_MARGIN of it are checked for free space; judge_free_space False: the clouds'
   origins are not their sensors' (no free-space check)."""
@@ -106,4 +119,4 @@ def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
       if other is None or other <= MAX_CONFLICT:
         runner_up = float(candidate_fitness[c])
         break
-  return judge(fitness, conflict(transform), free, runner_up)
+  return judge(fitness, conflict(transform), free, runner_up, support)
