@@ -1,5 +1,7 @@
 """Free-space consistency and the verdict on a pose (`registered` with its reason)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -126,8 +128,8 @@ def test_register_returns_the_verdict_with_the_pose():
 def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
   """A learned descriptor that fails on a pair (here noise at any sampling: its candidates
   hold no right pose, and the BEV search is off) leaves a pose the verdict refuses; the
-  retry registers the pair again, with the model's own sampling (noise again, refused)
-  and then with FPFH at the same keypoints, and keeps FPFH's pose, which is right and
+  retry registers the pair again, with keypoints on the structure and with the model's
+  own sampling (noise again, refused) and then with FPFH at the first keypoints, and keeps FPFH's pose, which is right and
   trusted, with a note saying so. Without the retry the refused pose stands."""
   cloud1, cloud2, t12 = _drive_pair(0, 7)
   monkeypatch.setattr(inference, 'describe', lambda model, points, at, **kw: (
@@ -153,6 +155,27 @@ def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
 
 
 @pytest.mark.real_data
+def test_a_refused_pose_is_registered_again_with_keypoints_on_the_structure(monkeypatch):
+  """Where the descriptors at keypoints drawn from every point fail on a pair (here noise
+  in their place), the retry draws the keypoints from the structure above the ground
+  (`cloud_features.keypoint_domain`) and keeps that pose, right and trusted, before the
+  model's own sampling and FPFH are tried."""
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  describe = inference.describe
+  monkeypatch.setattr(inference, 'describe', lambda model, points, at, **kw: (
+      np.random.default_rng(len(points)).normal(size=(len(at), 32)).astype(np.float32)
+      if model.keypoints == 'all' else describe(model, points, at, **kw)))
+  reg, f1, _ = pipeline.register(target=cloud1, source=cloud2,
+                                 model=pretrained.load(pretrained.DEFAULT),
+                                 options=options_lib.Options(bev=0))
+  assert reg.verdict.registered and metrics.registration_errors(t12, reg.transform)['success']
+  kept = [name for name, note in pipeline.RETRY_NOTES.items()
+          if any(n.startswith(note.split('{')[0]) for n in reg.notes)]
+  assert kept == ['structure'], reg.notes
+  assert f1.descriptors.shape[1] == 32   # the learned descriptors' pose is kept
+
+
+@pytest.mark.real_data
 def test_a_refused_pose_is_registered_again_with_the_models_own_sampling(monkeypatch):
   """Where the first try's sampling of each ball (one of 32 points) fails on a pair (here
   noise in its place), the retry describes the clouds as the model was trained (its own
@@ -169,8 +192,13 @@ def test_a_refused_pose_is_registered_again_with_the_models_own_sampling(monkeyp
   assert reg.verdict.registered and metrics.registration_errors(t12, reg.transform)['success']
   assert any(n.startswith(pipeline.RETRY_NOTES['learned'].split('{')[0]) for n in reg.notes)
   assert not any('FPFH' in n for n in reg.notes), reg.notes
-  # where the first try already describes as the model was trained, only FPFH is left
-  own = pipeline.Registrar(lambda key: cloud1, model=model, options=options_lib.Options(draws=0))
-  assert list(own._retries) == ['fpfh']   # pylint: disable=protected-access
+  # Only the tries that differ from the first are made: no learned one where it already
+  # samples each ball as the model was trained, from the structure.
+  retries = lambda m, **kw: list(pipeline.Registrar(  # pylint: disable=protected-access
+      lambda key: cloud1, model=m, options=options_lib.Options(**kw))._retries)
+  assert retries(model) == ['structure', 'learned', 'fpfh']
+  assert retries(model, draws=0) == ['structure', 'fpfh']
+  assert retries(dataclasses.replace(model, keypoints='structure'), draws=0) == ['fpfh']
+  assert retries(model, keypoints='iss') == ['learned', 'fpfh']
   with pytest.raises(errors.UserError, match='retry'):
     options_lib.Options(retry='learned,sift')

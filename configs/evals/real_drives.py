@@ -20,9 +20,9 @@ FPFH pipeline; KISS-Matcher + ICP where `kiss-matcher` is installed (pip install
 '.[bench]'). A set not made is skipped and the report says so. Open3D's row takes ~13 s a
 pair on the five drives' scans: drop it (`--config.evals.drives.rows=...`) for a quick run.
 
-Expected (2-core VM): the defaults register 92.5 % of the five drives' 214 pairs, 62.5 %
-of the Livox drive's 80 and 95.3 % of Riverside02's 128 (`--config.checkpoints.ours_mined=ours`
-for `ours`: 91.6, 57.5 and 84.4 %); docs/notes/real_drives.md has the tables and what each
+Expected (2-core VM): the defaults register 94.9 % of the five drives' 214 pairs, 65.0 %
+of the Livox drive's 80 and 98.4 % of Riverside02's 128 (`--config.checkpoints.ours_mined=ours`
+for `ours`: 92.1, 57.5 and 93.0 %); docs/notes/real_drives.md has the tables and what each
 stage loses.
 """
 

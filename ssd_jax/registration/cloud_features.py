@@ -209,7 +209,8 @@ def keypoint_domain(points: np.ndarray, domain: str = 'all') -> np.ndarray:
   canopies), all of them where fewer than `keypoints.ENOUGH_KEYPOINTS` rise. Two scans of
   one unit draw the same rings on the ground at the same ranges from their sensors; for a
   unit whose matches there pull two standpoints together, `experiments.adapt` picks
-  'structure' (`keypoint_choice`, docs/notes/cross_sensor.md)."""
+  'structure' (`keypoint_choice`, docs/notes/cross_sensor.md), and the register command
+  tries it where a pose from every point is refused (`options.RETRIES`)."""
   if domain not in inference.KEYPOINT_SELECTIONS:
     raise ValueError(f'keypoint domain must be one of {inference.KEYPOINT_SELECTIONS}, '
                      f'got {domain!r}')

@@ -29,12 +29,14 @@ SAMPLINGS = ('auto', 'compatible', 'uniform')
 # Whether each scan is first turned level by its ground (`Options.level`, `leveling`).
 LEVELS = ('none', 'ground')
 # What registers a pair again whose learned descriptors' pose the verdict refuses, in turn
-# until the verdict trusts a pose: 'learned', the learned descriptors sampled as the model
-# was trained (its own draws of its own points, where the first try sampled fewer:
-# `describing`); 'fpfh', the classical descriptor at the same keypoints. Descriptors that
-# fail on different pairs: where one's candidates hold no right pose, another's sometimes
-# do (docs/notes/real_drives.md).
-RETRIES = ('learned', 'fpfh')
+# until the verdict trusts a pose: 'structure', keypoints sampled from the points above the
+# ground (`cloud_features.keypoint_domain`, where the first try sampled every point);
+# 'learned', the learned descriptors sampled as the model was trained (its own draws of
+# its own points, where the first try sampled fewer: `describing`); 'fpfh', the classical
+# descriptor at farthest-point keypoints from every point. Keypoints and descriptors that fail on
+# different pairs: where one's candidates hold no right pose, another's sometimes do
+# (docs/notes/real_drives.md).
+RETRIES = ('structure', 'learned', 'fpfh')
 
 
 # How the learned descriptor samples each ball where the candidate poses are verified

@@ -31,12 +31,15 @@ UPRIGHT_NOTE = 'registered as given (z up): its verified pose is clear'
 ANY_ROTATION_NOTE = 'registered with FPFH and RANSAC over any rotation'
 # A pose the verdict refuses is registered again (`Options.retry`), noted as one of these
 # with the first pose's reason.
-RETRY_NOTES = {'learned': 'registered again with the learned descriptors sampled as the '
+RETRY_NOTES = {'structure': 'registered again with keypoints on the structure above the '
+                            'ground, the first pose refused ({})',
+               'learned': 'registered again with the learned descriptors sampled as the '
                           'model was trained, the first pose refused ({})',
                'fpfh': "registered again with FPFH descriptors, the learned ones' pose "
                        'refused ({})'}
-# The features of a retry with the learned descriptors, as `_Cloud.features` keeps them.
+# The features of the retries with the learned descriptors, as `_Cloud.features` keeps them.
 OWN_SAMPLING = 'learned, own sampling'
+ON_STRUCTURE = 'learned, keypoints on the structure'
 
 
 def _settled(reg: pair_stages.Registration) -> bool:
@@ -95,8 +98,8 @@ class PairResult:
 @dataclasses.dataclass
 class _Cloud:
   points: prepared.PreparedCloud   # on the grid, centred (`offset`), levelled (`Options.level`)
-  # descriptor -> keypoints and descriptors of `points` (the options' own; OWN_SAMPLING and
-  # 'fpfh' once a pair is registered again, `Options.retry`)
+  # descriptor -> keypoints and descriptors of `points` (the options' own; ON_STRUCTURE,
+  # OWN_SAMPLING and 'fpfh' once a pair is registered again, `Options.retry`)
   features: dict[str, cloud_features.FeatureLevels]
   seconds: dict                    # read, grid, level and its first level's features, once
   level: leveling.Leveling         # how `points` was levelled
@@ -119,14 +122,22 @@ class Registrar:
                cache_size: int = CACHE_SIZE, progress: Callable[[str], None] | None = None):
     self._options = options_lib.Options() if options is None else options
     self._read, self._model, self._say = read, self._options.describing(model), say
-    # The tries after the first where the verdict refuses (`Options.retries`): name ->
-    # (features key, options, model); the learned one only where the first try samples
-    # each ball otherwise than the model was trained.
-    tries = {'fpfh': ('fpfh', dataclasses.replace(self._options, descriptor='fpfh'), None),
-             'learned': (OWN_SAMPLING, self._options, model)}
-    sampling = lambda m: (m.draws, m.num_samples)
-    self._retries = {name: tries[name] for name in self._options.retries
-                     if name == 'fpfh' or sampling(model) != sampling(self._model)}
+    # The tries after the first where the verdict refuses (`Options.retries`: learned
+    # descriptors): name -> (features key, options, model), each learned one only where the
+    # first try differs from it (farthest-point keypoints from every point; balls sampled
+    # otherwise than the model was trained).
+    self._retries = {}
+    for name in self._options.retries:
+      if name == 'fpfh':
+        self._retries[name] = ('fpfh', dataclasses.replace(self._options, descriptor='fpfh'),
+                               None)
+      elif name == 'structure' and self._options.keypoints == 'auto' and (
+          self._model.keypoints != 'structure'):
+        self._retries[name] = (ON_STRUCTURE, self._options,
+                               dataclasses.replace(self._model, keypoints='structure'))
+      elif name == 'learned' and ((model.draws, model.num_samples)
+                                  != (self._model.draws, self._model.num_samples)):
+        self._retries[name] = (OWN_SAMPLING, self._options, model)
     self._stage = (lambda name: None) if progress is None else progress
     self.voxel = (cloud_features.voxel_size_of(self._model) if self._options.voxel is None
                   else self._options.voxel)   # metres: the grid every cloud is put on
