@@ -9,6 +9,8 @@ from ssd_jax import pretrained
 from ssd_jax.configs.evals import real_drives as real_drives_config
 from ssd_jax.data import clean, io, real_drives, registration_sets
 from ssd_jax.evaluation import evaluators
+from ssd_jax.registration import metrics, pipeline
+from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
 
 
@@ -89,3 +91,23 @@ def test_a_pair_whose_drive_pose_does_not_hold_up_is_replaced(tmp_path):
                               per_bin=1, turned=False,
                               pose_holds=lambda a, b, t: len(a) != len(scans[0]))
   assert len(rows) == 1 and not rows[0]['source'].startswith('kitti00/000000-')
+
+
+@pytest.mark.real_data
+def test_a_far_real_pair_refused_from_every_point_is_registered_on_the_structure():
+  """Two scans of a real river road 20.6 m apart (riverside02's 8 and 14, an OS1-64):
+  keypoints drawn from every point leave a pose the verdict refuses; the retry with
+  keypoints on the structure above the ground registers the pair, right and trusted."""
+  drive = real_drives.read_drive(shared_path('real_drives', 'riverside02'))
+  cloud1, cloud2 = (clean.clean_cloud(io.read_cloud(drive.scans[n]), '', np.float64)
+                    for n in (8, 14))
+  t12 = np.linalg.inv(drive.poses[8]) @ drive.poses[14]
+  model = pretrained.load(pretrained.DEFAULT)
+  first, _, _ = pipeline.register(target=cloud1, source=cloud2, model=model,
+                                  options=options_lib.Options(retry='none'))
+  assert not first.verdict.registered, first.verdict
+  reg, _, _ = pipeline.register(target=cloud1, source=cloud2, model=model)
+  assert reg.verdict.registered, reg.verdict
+  assert metrics.registration_errors(t12, reg.transform)['success']
+  structure = pipeline.RETRY_NOTES['structure'].split('{')[0]
+  assert any(n.startswith(structure) for n in reg.notes), reg.notes
