@@ -129,8 +129,9 @@ def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
   """A learned descriptor that fails on a pair (here noise at any sampling: its candidates
   hold no right pose, and the BEV search is off) leaves a pose the verdict refuses; the
   retry registers the pair again, with keypoints on the structure and with the model's
-  own sampling (noise again, refused) and then with FPFH at the first keypoints, and keeps FPFH's pose, which is right and
-  trusted, with a note saying so. Without the retry the refused pose stands."""
+  own sampling (noise again, refused) and then with FPFH at farthest-point keypoints, and
+  keeps FPFH's pose, which is right and trusted, with a note saying so. Without the retry
+  the refused pose stands."""
   cloud1, cloud2, t12 = _drive_pair(0, 7)
   monkeypatch.setattr(inference, 'describe', lambda model, points, at, **kw: (
       np.random.default_rng(len(points)).normal(size=(len(at), 32)).astype(np.float32)))
