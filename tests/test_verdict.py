@@ -88,7 +88,7 @@ def test_each_reason_of_the_verdict():
   assert set(verdict.REASONS) == set(cases)
   assert verdict.judge(0.6, 0.02).to_json() == {
       'registered': True, 'reason': '', 'fitness': 0.6, 'free_space_conflict': 0.02,
-      'runner_up_fitness': None}
+      'runner_up_fitness': None, 'support': None}
 
 
 @pytest.mark.real_data
@@ -122,6 +122,7 @@ def test_register_returns_the_verdict_with_the_pose():
   assert metrics.registration_errors(t12, reg.transform)['success']
   assert reg.verdict.registered and reg.verdict.conflict is not None, reg.verdict
   assert reg.verdict.fitness >= verdict.MIN_FITNESS
+  assert reg.verdict.support == int(reg.inliers.sum()) >= verdict.MIN_SUPPORT   # judged on
 
 
 @pytest.mark.real_data

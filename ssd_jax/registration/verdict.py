@@ -51,12 +51,14 @@ class Verdict:
   """The verdict on one pose. fitness: share of cloud 2's structure within FIT_DISTANCE of
   cloud 1; conflict: `free_space.conflict` (None where not judged); runner_up: the
   fitness of the best distinct candidate that passes the free-space check, where one fits
-  within AMBIGUOUS_MARGIN of the chosen pose (else None)."""
+  within AMBIGUOUS_MARGIN of the chosen pose (else None); support: the descriptor matches
+  the pose explains (None where not counted)."""
   registered: bool
   reason: str            # '' where registered, else REASONS[k] + ': ' + what was measured
   fitness: float
   conflict: float | None = None
   runner_up: float | None = None
+  support: int | None = None
 
   @property
   def kind(self) -> str:
@@ -65,7 +67,8 @@ class Verdict:
 
   def to_json(self) -> dict:
     return {'registered': self.registered, 'reason': self.reason, 'fitness': self.fitness,
-            'free_space_conflict': self.conflict, 'runner_up_fitness': self.runner_up}
+            'free_space_conflict': self.conflict, 'runner_up_fitness': self.runner_up,
+            'support': self.support}
 
   def line(self) -> str:
     """'registered' or 'NOT registered (reason)', for the one-line summaries."""
@@ -94,7 +97,7 @@ def judge(fitness: float, conflict: float | None, free: str = '',
   elif support is not None and support < MIN_SUPPORT and fitness < SUPPORTED_FITNESS:
     reason = (f'unsupported: {support} of the descriptor matches agree with the pose, which '
               f"lays {fitness:.0%} of cloud 2's structure on cloud 1")
-  return Verdict(not reason, reason, float(fitness), conflict, runner_up)
+  return Verdict(not reason, reason, float(fitness), conflict, runner_up, support)
 
 
 def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
