@@ -9,25 +9,16 @@ fine-tune on them, then export the model with a model card.
 
 The scans (.bin/.npy/.ply/.pcd/.las/.laz/.xyz/.pts/.vtk, one sweep each, centred on the
 sensor, z up) are read in name order as a drive. `--pairs=auto` first mines pairs of them
-(`experiments.mine`: the classical registration, kept where the verdict trusts its poses
-and they close loops; no pose is read; a long drive thinned to `mining.max_scans` scans,
-every k-th, k halved while its teacher cannot close loops of three: `mining.stride_for`)
-into OUT/mined_pairs.csv, then trains the paper's objective with half of each batch's
-second branches a real second scan moved by the mined transform (two-view training,
-`datasets.MinedPairDataset`) and half the paper's turned copy. Then it widens, as EYOC
-does (`mining.widen_rounds` times): the model trained so far mines the next two doubled
-gaps, farther than the classical teacher reached, under the same gate, and training goes
-on with every kept pair (the steps split evenly between the rounds, one learning-rate
-schedule). Where no pair passes (scans not in capture order), and with `--pairs=none`,
-it trains the paper's single-scan objective alone. Last, with `--keypoints=auto`, the
-adapted model's descriptor alone registers 32 pairs farther apart than the miner reached
-(each two kept pairs chained) twice, its keypoints sampled from all points and from the
-structure above the ground, and the export keeps the domain that registers more
-(`adaptation.keypoint_choice`; 'structure' on a tie: the sensor's own ground rings can
-only mislead its matches). OUT/run holds the training run (rerun the command to resume it,
-mining too); OUT holds the exported model (config.json, weights.msgpack) and MODEL_CARD.md
-(base model, scans, pairs, steps, keypoints, wall time, machine, command).
-docs/notes/speed.md times it on 2 CPU cores.
+into OUT/mined_pairs.csv (`experiments.mine`: the classical registration, kept where the
+verdict trusts its poses and they close loops; no pose is read), trains on them, widens
+as EYOC does (the model trained so far mines farther gaps, then training goes on with
+every kept pair) and, with `--keypoints=auto`, keeps the keypoint domain its descriptor
+alone registers more mined pairs from (`adaptation.keypoint_choice`). The recipe and its
+expected result: configs/training/adapt.py. Without pairs (scans not in capture order,
+`--pairs=none`) it trains the paper's single-scan objective alone. OUT/run holds the
+training run (rerun the command to resume it, mining too); OUT holds the exported model
+(config.json, weights.msgpack) and MODEL_CARD.md (base model, scans, pairs, steps,
+keypoints, wall time, machine, command). docs/notes/speed.md times it on 2 CPU cores.
 """
 
 import datetime

@@ -130,7 +130,6 @@ def load(checkpoint_dir: str | os.PathLike, step: int | None = None) -> Model:
   return dataclasses.replace(model, step=int(step))
 
 
-
 # XLA:CPU hands dots, elementwise ops and reductions to YNNPACK one by one with this
 # setting; its default groups the whole descriptor branch of a 256-cluster chunk into
 # one library fusion that ran 1.4x slower on the 2-core VM (docs/notes/speed.md).

@@ -11,15 +11,12 @@ front-facing unit sees only a horizontal sector. The presets follow the data she
     front120 Hesai AT128-like (solid)    128  +12.9 ... -12.5, 0.2       0.1           120 (x fwd)
     os0_64   Ouster OS0-64 (wide field)    64  +45 ... -45, ~1.43         0.35          360
 
-`os0_64` is the unit no shipped model trained on (the adaptation's measurement,
-`configs/data/os0_pairs.py`): a short-range (50 m) robot sensor, half of whose beams
-look up and whose ground rings end ~35 m out.
-
-`ssd_jax.synthetic.lidar` casts their rays into a simulated scene; `resample` keeps the
-points of a real cloud that one of their beams would have hit from a given standpoint,
-which is how the cross-sensor real pairs are made (`ssd_jax.data.rescan`); `cast` casts
-the unit's own rays at the surfaces a cloud samples, so its returns lie on the unit's
-rings about its own standpoint, not on the rings of the sensor that took the cloud.
+`os0_64` (a short-range robot unit, half of whose beams look up) is the one no shipped
+model trained on (`configs/data/os0_pairs.py`). `ssd_jax.synthetic.lidar` casts their rays
+into a simulated scene; `resample` keeps the points of a real cloud one of their beams would
+have hit from a given standpoint (the cross-sensor real pairs, `ssd_jax.data.rescan`);
+`cast` casts the unit's own rays at the surfaces a cloud samples, so its returns lie on the
+unit's rings about its own standpoint.
 """
 
 from __future__ import annotations

@@ -1,2 +1,2 @@
-"""Benchmarks: scripts that time the training step, inference, RANSAC and registration
-and print a table (docs/benchmarks.md)."""
+"""Benchmarks: scripts that time the training step, inference and registration and
+print a table (docs/benchmarks.md)."""

@@ -15,11 +15,10 @@ from a displaced, turned virtual sensor; `ssd_jax.data.rescan`).
     python -m experiments.data.make_real_pairs --drives=real_drives/* --out=data_cache/real_drives
 
 Every scan matching --sources (default: every `.bin` under REAL/example and
-REAL/kitti_object_velodyne) gives --pairs_per_cloud
-pairs, one per equal bin of relative yaw over the whole circle. With --drives, each drive
-folder (scans/NNNNNN.bin + poses.txt, `ssd_jax.data.real_drives`) gives pairs of its own
-scans, where the drive's pose holds up (`pose_holds`). The set is a function of --seed; the
-real scans are read, never copied into the project.
+REAL/kitti_object_velodyne) gives --pairs_per_cloud pairs, one per equal bin of relative
+yaw. With --drives, each drive folder (scans/NNNNNN.bin + poses.txt,
+`ssd_jax.data.real_drives`) gives pairs of its own scans where its pose holds up
+(`pose_holds`). The set is a function of --seed; the real scans are read, never copied.
 """
 
 import os

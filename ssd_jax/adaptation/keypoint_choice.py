@@ -2,23 +2,16 @@
 own scans: no pose is read.
 
 Two scans of one spinning unit draw the same rings on the ground at the same ranges from
-their sensors, and the ground's descriptors carry that range. For some units the matches
+their sensors, and the ground's descriptors carry that range: for some units the matches
 among those rings outvote the structure's and pull two standpoints together
-(docs/notes/cross_sensor.md); across units, whose rings differ, the ground's matches
-help. So `experiments.adapt` registers mined pairs with the adapted model, its descriptor
-alone, once from each keypoint domain of `inference.KEYPOINT_SELECTIONS`, against the
-miner's transforms, and keeps the domain that registers more. On a tie it keeps
-'structure': the pairs a user registers with an adapted model are two scans of that one
-unit, whose rings can only mislead, most of all far apart. On the Livox drive of
-docs/notes/real_drives.md four adaptations of five tied, and from the structure the
-register command's defaults registered 2-6 of its 80 pairs more than from all points;
-every adaptation of docs/notes/cross_sensor.md chose the structure outright.
-
-The pairs the miner keeps are those its teacher registers with confidence: on the OS0-64
-drive the adapted descriptor registered all 32 of the farthest from either domain. The
-choice is made where the two can differ: pairs farther apart than the miner's own,
-composed of two kept pairs (`mined_pairs.chained`): with G the largest gap at which the
-miner kept CHOICE_PAIRS pairs, the gaps G+1 to 2G, as many pairs of each.
+(docs/notes/cross_sensor.md). So `experiments.adapt` registers mined pairs with the
+adapted model's descriptor alone, once from each keypoint domain of
+`inference.KEYPOINT_SELECTIONS`, and keeps the domain that registers more; on a tie,
+'structure' (a user's pairs are two scans of that one unit, whose rings can only
+mislead). The pairs are where the two can differ: farther apart than the miner's own,
+each composed of two kept pairs (`mined_pairs.chained`): with G the largest gap at which
+the miner kept CHOICE_PAIRS pairs, the gaps G+1 to 2G, as many pairs of each.
+Measured choices: docs/notes/real_drives.md and docs/notes/cross_sensor.md.
 """
 
 from __future__ import annotations

@@ -2,30 +2,27 @@
 mined from a folder of unlabeled scans in capture order (a drive, a survey) by the
 project's own classical registration, and kept only where it is self-consistent.
 
-1. Candidates: every scan i with scan i + g for each gap g of `gaps` (capture order
-   puts scans a few metres apart next to each other; growing gaps reach farther pairs,
-   up to the first gap the teacher no longer registers).
-2. Each candidate is registered by `pipeline.register_many` with `teacher_options()`:
-   FPFH matches, RANSAC, the bird's-eye-view search, verification by ICP. No learned model
-   and no pose is read.
+1. Candidates: every scan i with scan i + g for each gap g of `gaps` (capture order puts
+   scans a few metres apart next to each other; growing gaps reach farther pairs, up to
+   the first gap the teacher no longer registers).
+2. Each candidate is registered by `pipeline.register_many` with `teacher_options()`
+   (FPFH, RANSAC, the bird's-eye-view search, verification by ICP); no learned model and
+   no pose is read.
 3. Gate: a pair is *confident* when its verified pose lays `MIN_FITNESS` of scan 2's
    structure on scan 1 with no distinct pose close behind
-   (`verification.clearly_confident`) and the register command's verdict trusts it
-   (`verdict`: no free-space conflict, no corridor). It is *kept* when it is also one side of
-   a loop of three confident pairs (i, j), (j, k), (i, k) whose poses agree:
-   T_ij T_jk within `CYCLE_ROTATION_DEG` and `CYCLE_TRANSLATION_M` of T_ik, or of four,
-   T_ij T_jl against T_ik T_kl. Two wrong poses rarely compose into a third wrong pose found
-   on its own, so the loop, not the fitness, is what makes a label trustworthy.
+   (`verification.clearly_confident`) and the register command's verdict trusts it. It
+   is *kept* when it is also one side of a loop of three confident pairs (i, j), (j, k),
+   (i, k) whose poses agree (T_ij T_jk within `CYCLE_ROTATION_DEG` and
+   `CYCLE_TRANSLATION_M` of T_ik), or of four (T_ij T_jl against T_ik T_kl). Two wrong
+   poses rarely compose into a third wrong pose found on its own: the loop, not the
+   fitness, makes a label trustworthy.
 
 Widening (EYOC's curriculum): a model trained on the kept pairs registers farther pairs
 than its teacher did; `widened_gaps` names the next gaps, `mine(model=...)` registers them
-with it (the same gate), and `mine_to_file` gates the pairs of every round together, so
-a far pair is also kept through loops closed by nearer labels of the round before.
-`spread` thins a long drive to the scans mined (the cost is a pair's registration), at the
-stride `stride_for` finds its teacher closing loops at.
-
-`label_errors` measures the kept labels against ground-truth poses where a user has them
-(the miner never reads them).
+with it, and `mine_to_file` gates every round's pairs together, so a far pair is also kept
+through loops closed by nearer labels. `spread` thins a long drive to the scans mined, at
+the stride `stride_for` finds its teacher closing loops at. `label_errors` measures the
+kept labels against ground-truth poses where a user has them (the miner never reads them).
 """
 
 from __future__ import annotations

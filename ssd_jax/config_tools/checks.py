@@ -18,7 +18,6 @@ AUGMENTATIONS = ('jitter', 'rotate_small', 'shift', 'rotate_1d')
 LR_SCHEDULES = ('constant', 'cosine')
 
 
-
 class ConfigError(errors.UserError):
   """A config value is out of range or inconsistent."""
 

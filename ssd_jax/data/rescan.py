@@ -1,22 +1,19 @@
 """Registration pairs from single real scans: a re-scan from a displaced virtual sensor
 (or, for submaps accumulated along a drive, a second submap of the place).
 
-No ground truth ships with the real clouds beside the project, and a pair made of a
-cloud and a rigidly moved copy of it is too easy (the same points, the same
+A cloud and a rigidly moved copy of it is too easy a pair (the same points, the same
 density). A re-scan differs the way two scans of a moving sensor differ:
 
-  * the virtual sensor stands 2-10 m away (horizontally) and is turned by a yaw
-    drawn over the whole circle;
-  * it sees only what is visible from there (Open3D's hidden point removal, the
-    spherical-flip operator of Katz et al. 2007) within its range;
-  * optionally, the virtual sensor is another unit (`sensor`, a name of
-    `ssd_jax.sensors.SENSORS`): its view keeps only what that unit's beams would return
-    (`sensors.resample`), e.g. the rings of a 16-beam unit or a 120-degree sector;
-  * both views are voxel-grid downsampled on grids with their own random offsets,
-    so no point is shared, and get their own sensor noise.
+  * the virtual sensor stands 2-10 m away (horizontally), turned by a yaw drawn over the
+    whole circle, and sees only what is visible from there within its range (Open3D's
+    hidden point removal, Katz et al. 2007);
+  * optionally it is another unit (`sensor`, a name of `ssd_jax.sensors.SENSORS`): its
+    view keeps only what that unit's beams would return (`sensors.resample`);
+  * both views are voxel-grid downsampled on grids with their own random offsets, so no
+    point is shared, and get their own sensor noise.
 
-Cloud 2 is expressed in the virtual sensor's frame; T_12 (the pose of the virtual
-sensor in cloud 1's frame) maps it back, as `groundtruths.txt` expects.
+Cloud 2 is in the virtual sensor's frame; T_12 (its pose in cloud 1's frame) maps it
+back, as `groundtruths.txt` expects.
 """
 
 from __future__ import annotations

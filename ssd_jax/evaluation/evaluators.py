@@ -10,13 +10,11 @@ section `{type: <evaluator>, <its settings>}`:
     figures              Fig. 3 (keypoints) and Figs. 5-6 (registration examples)
     cross_sensor         registration as a sensor x distance matrix, with Open3D's pipeline
 
-Settings shared by all (checkpoints, keypoint x descriptor rows, RANSAC, seeds) sit at
-the top of the config (configs/evals/evaluation.py). Data paths are tried in order, relative
-to `config.data_root`; an evaluation whose data is not there is skipped and the report
-says why. `evaluate` runs them, in the order of `TYPES`, then by name, writes each one's
-tables and figures into the workdir under its name, and OUT/report.md holding them all
-with the checkpoints, what was skipped, a hash per stage, the time per stage and the
-config.
+Shared settings (checkpoints, rows, RANSAC, seeds): configs/evals/evaluation.py. Data
+paths are tried in order, relative to `config.data_root`; an evaluation without its data
+is skipped and the report says why. `evaluate` runs them in the order of `TYPES`, writes
+each one's tables and figures under its name, and OUT/report.md with them all, the
+checkpoints, what was skipped, a hash and the time per stage, and the config.
 """
 
 from __future__ import annotations

@@ -24,24 +24,6 @@ def orientation_error_deg(theta: np.ndarray, theta_turned: np.ndarray,
   return np.abs(np.degrees(np.angle(np.exp(1j * diff))))
 
 
-def orientation_errors(model: inference.Model, points: np.ndarray, centers: np.ndarray,
-                       angles: Sequence[float]) -> np.ndarray:
-  """points [N, 3], centers [K, 3] metres, angles [A] radians -> errors [A, K] degrees."""
-  _, theta = inference.detect_at(model, points, centers)
-  out = []
-  for phi in angles:
-    rz = np.asarray(geometry.rotation_z(np.float32(phi)), np.float32)
-    _, turned = inference.detect_at(model, points @ rz.T, centers @ rz.T)
-    out.append(orientation_error_deg(theta, turned, phi))
-  return np.stack(out)
-
-
-def summarize(errors: np.ndarray, within_deg: float = 15.0) -> dict[str, float]:
-  """-> {'median_deg', 'within'}: the median error and the share below `within_deg`
-  (0.083 for errors uniform on [0, 180] degrees)."""
-  return {'median_deg': float(np.median(errors)), 'within': float(np.mean(errors < within_deg))}
-
-
 def rotation_sweep(model: inference.Model, points: np.ndarray, centers: np.ndarray,
                    angles_deg: Sequence[float]) -> list[dict[str, float]]:
   """Turn the whole cloud about z by each angle and compare every cluster with itself.

@@ -1,23 +1,17 @@
-"""Open3D's own registration pipeline: the outside reference the project's pipeline is
-timed and scored against.
+"""The outside anchors the project's pipeline is timed and scored against.
 
-Open3D's ISS with the paper's parameters, normals, FPFH at the keypoints,
-nearest-neighbour correspondences, and `registration_ransac_based_on_correspondence` at
-1 m, 99 % confidence, <= 10,000 trials. Two settings of the normal and FPFH searches
-(`SETTINGS`):
+`open3d_register`: Open3D's own pipeline, ISS with the paper's parameters, normals, FPFH
+at the keypoints, nearest-neighbour correspondences and
+`registration_ransac_based_on_correspondence` at 1 m, 99 % confidence, <= 10,000 trials,
+with one of two settings of the normal and FPFH searches (`SETTINGS`): 'paper' (normals
+and FPFH within 4 m, no neighbour cap, normals towards the sensor: PCL's radius search
+and viewpoint rule, docs/method.md §4) or 'tutorial' (Open3D's registration tutorial:
+normals within 1 m and at most 30 neighbours, FPFH within 4 m and at most 100: ~4x
+faster, less distinctive). Nothing of the project's own pipeline runs there but the
+nearest-neighbour matching.
 
-  * 'paper': the paper's, normals and FPFH both within 4 m with no neighbour cap and
-    normals turned towards the sensor at the origin (PCL's radius search and viewpoint
-    rule, docs/method.md §4);
-  * 'tutorial': as Open3D's registration tutorial writes it, normals within 1 m (at most
-    30 neighbours, as Open3D orients them) and FPFH within 4 m but at most 100
-    neighbours (~2 m of the 4 m ball in a 0.2 m-voxel scan): ~4x faster, less
-    distinctive.
-
-Nothing of the project's own pipeline runs here but the nearest-neighbour matching.
-
-`kiss_matcher_register` is the other outside anchor: KISS-Matcher (PyPI `kiss-matcher`,
-the `bench` extra; never a runtime dependency), refined by Open3D's point-to-plane ICP.
+`kiss_matcher_register`: KISS-Matcher (PyPI `kiss-matcher`, the `bench` extra; never a
+runtime dependency), refined by Open3D's point-to-plane ICP.
 """
 
 from __future__ import annotations

@@ -2,23 +2,17 @@
 scans, scored at once.
 
 Two scans of one street taken tens of metres apart, by units with different beams, share
-few local neighbourhoods that look alike (a descriptor's nearest neighbour is the true
-partner for ~1 % of keypoints 30-40 m apart, docs/notes/cross_sensor.md), yet they share the
-street's layout: where walls, poles, trees and cars stand. Seen from above, what rises
-above the ground is nearly the same for any unit that hits it at all. Each cloud becomes
-a top-down image of the cells holding such points (`structure_image`); cloud 2's image is
-made at every yaw on a `YAW_STEP` circle, and the translation that lays it best on cloud
-1's is the peak of their cross-correlation, all translations at once by FFT (`search`:
-coarse to fine, every other yaw on cells twice as wide first, then the best peaks at
-full resolution; each cloud's ground and structure found once, `footprint`). The best
-distinct peaks are candidate poses for `verification.verify`, which refines them by ICP
-and keeps the one the clouds agree with: the same role as RANSAC's candidates, from the
-whole scene instead of the matches. For scans whose z axis is up (vehicles,
-tripods), as upright RANSAC.
-
-The exhaustive correlation over yaw is the classic way to align two top-down maps (as in
-Fourier-based and Radon-based LiDAR place recognition, e.g. RING++, Xu et al., T-RO 2023);
-it needs no training and no features.
+few local neighbourhoods that look alike, yet they share the street's layout: where
+walls, poles, trees and cars stand. Each cloud becomes a top-down image of the cells
+holding what rises above its ground (`structure_image`); cloud 2's image is made at every
+yaw on a `YAW_STEP` circle, and the translation that lays it best on cloud 1's is the
+peak of their cross-correlation, all translations at once by FFT (`search`: coarse to
+fine, every other yaw on cells twice as wide first, then the best peaks at full
+resolution; each cloud's ground and structure found once, `footprint`). The best distinct
+peaks are candidate poses for `verification.verify`, beside RANSAC's: from the whole
+scene instead of the matches. For scans whose z axis is up, as upright RANSAC. The
+exhaustive correlation over yaw is the classic way to align two top-down maps (as in
+RING++, Xu et al., T-RO 2023); it needs no training and no features.
 """
 
 from __future__ import annotations

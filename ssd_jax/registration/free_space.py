@@ -1,23 +1,19 @@
 """Free-space consistency: under a right pose, no point of one scan lies where the other
 scan's laser passed through.
 
-A scan in its sensor's frame says more than where surfaces are: along each ray, the space
-between the sensor and its first return is empty. Under a right pose, a point of scan 2
-may lie beyond what scan 1 saw in its direction (occluded from scan 1, or out of its
-range), never well in front of it. A wrong pose that still lays the ground and some
-structure on scan 1 (two scans far apart along a street, where the ground fits every
-upright pose) puts scan 2's walls and poles in scan 1's empty space: the classical check
-that tells such a pose from a right one where fitness alone cannot (e.g. Huber and
-Hebert's visibility consistency, "Fully automatic registration of multiple 3D data sets",
-IVC 2003).
+Along each ray of a scan in its sensor's frame, the space between the sensor and its
+first return is empty. Under a right pose a point of scan 2 may lie beyond what scan 1
+saw in its direction (occluded, or out of range), never well in front of it. A wrong pose
+that still lays the ground and some structure on scan 1 puts scan 2's walls and poles in
+scan 1's empty space: the classical check that tells such a pose from a right one where
+fitness alone cannot (Huber and Hebert's visibility consistency, IVC 2003).
 
 Each scan is binned by direction from its sensor (`range_image`: the nearest return per
-AZIMUTH_STEP_DEG x ELEVATION_STEP_DEG cell, the nearest so that a cell holding both a
-near and a far return never calls a point in between a conflict). A point of the other
-scan in a cell seen by the sensor conflicts when the cell's nearest return lies more than
-`margin(range)` beyond it. `conflict` is the share of the tested points that conflict,
-the larger of the two directions (scan 2 in scan 1's rays, scan 1 in scan 2's).
-Only for scans in their sensors' frames (the sensor at the origin): `sensor_centred`.
+AZIMUTH_STEP_DEG x ELEVATION_STEP_DEG cell, so that a cell holding a near and a far
+return never calls a point in between a conflict). A point of the other scan in a seen
+cell conflicts when the cell's nearest return lies more than `margin(range)` beyond it.
+`conflict` is the larger share of the two directions; only for scans in their sensors'
+frames (`sensor_centred`).
 """
 
 from __future__ import annotations

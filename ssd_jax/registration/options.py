@@ -9,43 +9,25 @@ import dataclasses
 from ssd_jax.infra import errors
 from ssd_jax.registration import features
 
+# Each vocabulary's meaning: `Options`' docstring.
 KEYPOINTS = ('auto', 'iss', 'learned', 'random')
 DESCRIPTORS = ('fpfh', 'learned')
-# RANSAC's motion model: 'rigid', 3-point samples of any rotation (the paper's); 'upright',
-# 2-point samples of a turn about z and a translation, for scans whose z axis is up,
-# refit in 6 degrees of freedom (ransac.ransac_upright).
 ESTIMATORS = ('rigid', 'upright')
-# How the upright estimator takes its matches and samples (`estimate`): 'compatible', each
-# keypoint's nearest descriptor both ways (`matching.both_ways_matches`) and 2-point samples
-# drawn among the pairs of matches one turn about z and shift can fit
-# (`ransac.compatible_pairs`); 'uniform', cloud 1's nearest neighbours and uniform draws
-# (the paper's RANSAC with 2-point samples); 'auto', compatible where RANSAC's best pose is
-# the answer, uniform where its distinct best poses are verified against the clouds.
 # Compatible samples crowd into the strongest consensus: on a street that looks alike turned
 # by 180 degrees its 10 distinct best poses can all be variants of the turned one, where
 # uniform draws keep the right pose among them for the verification to pick
-# (docs/registration.md). The rigid estimator always samples uniformly.
+# (docs/registration.md).
 SAMPLINGS = ('auto', 'compatible', 'uniform')
-# Whether each scan is first turned level by its ground (`Options.level`, `leveling`).
 LEVELS = ('none', 'ground')
-# What registers a pair again whose learned descriptors' pose the verdict refuses, in turn
-# until the verdict trusts a pose: 'structure', keypoints sampled from the points above the
-# ground (`cloud_features.keypoint_domain`, where the first try sampled every point);
-# 'learned', the learned descriptors sampled as the model was trained (its own draws of
-# its own points, where the first try sampled fewer: `describing`); 'fpfh', the classical
-# descriptor at farthest-point keypoints from every point. Keypoints and descriptors that fail on
-# different pairs: where one's candidates hold no right pose, another's sometimes do
-# (docs/notes/real_drives.md).
+# Keypoints and descriptors that fail on different pairs: where one's candidates hold no
+# right pose, another's sometimes do (docs/notes/real_drives.md).
 RETRIES = ('structure', 'learned', 'fpfh')
 
 
-# How the learned descriptor samples each ball where the candidate poses are verified
-# against the clouds (the register defaults): one draw of 32 points, as the shipped models
-# trained. More points and draws steady the matches that RANSAC's best pose alone depends on
-# (the shipped models' 4 draws of 64 points, for the paper's protocol); with the BEV search
-# and the verification picking the pose, one draw of 32 registered every pair that four of
-# 64 did on every set of the README's table, at an eighth of the network's work
-# (docs/notes/speed.md).
+# How the learned descriptor samples each ball where the poses are verified (the register
+# defaults): one draw of 32 points, as the shipped models trained. With the BEV search and
+# the verification picking the pose, it registered every pair the paper protocol's 4 draws
+# of 64 did on the README's sets, at an eighth of the network's work (docs/notes/speed.md).
 VERIFIED_DRAWS = 1
 VERIFIED_SAMPLES = 32
 
@@ -96,7 +78,10 @@ class Options:
               each cloud once.
   retry       RETRIES in turn (a tuple, or names joined by commas; () or 'none': no
               retry): with learned descriptors and verify > 0, a pose the verdict
-              refuses is registered again with each until one is trusted (`retries`).
+              refuses is registered again with each until one is trusted (`retries`):
+              'structure' (keypoints from the points above the ground,
+              `cloud_features.keypoint_domain`), 'learned' (the model's own sampling of
+              its balls), 'fpfh' (the classical descriptor).
   """
   keypoints: str = 'auto'
   descriptor: str = 'learned'

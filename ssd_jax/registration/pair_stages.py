@@ -208,7 +208,7 @@ def assess(reg: Registration, points1, points2=None, origin: np.ndarray | None =
   pair = prepared.prepare_pair(points1, points2)
   cloud1, cloud2 = pair.cloud1, pair.cloud2
   assessed = uncertainty_lib.assess(cloud1.target, cloud2.source.points, reg.transform,
-                                    reg.verified_poses, reg.verified_fitness, origin)
+                                    origin)
   judged = verdict_lib.assess(pair, reg.transform, assessed.free, reg.verified_poses,
                               reg.verified_fitness,
                               judge_free_space=origin is None or not np.any(origin),

@@ -122,10 +122,8 @@ class Registrar:
                cache_size: int = CACHE_SIZE, progress: Callable[[str], None] | None = None):
     self._options = options_lib.Options() if options is None else options
     self._read, self._model, self._say = read, self._options.describing(model), say
-    # The tries after the first where the verdict refuses (`Options.retries`: learned
-    # descriptors): name -> (features key, options, model), each learned one only where the
-    # first try differs from it (farthest-point keypoints from every point; balls sampled
-    # otherwise than the model was trained).
+    # `Options.retries`: name -> (features key, options, model), each learned try only where
+    # the first differs from it (keypoints from every point; balls sampled otherwise).
     self._retries = {}
     for name in self._options.retries:
       if name == 'fpfh':

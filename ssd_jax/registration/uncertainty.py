@@ -1,30 +1,18 @@
 """How well a registered pose is fixed: the information matrix a pose graph takes, and the
-directions the two scans leave free.
+directions the two scans leave free (distinct poses that fit as well are the verdict's
+'ambiguous candidates', `verdict.assess`).
 
-Point-to-plane ICP fixes a pose only along what the surfaces' normals constrain. Two scans
-of a straight corridor, a tunnel or a road between barriers see walls whose normals are
-all across the way: a shift along it leaves every residual unchanged, so RANSAC and ICP
-return whichever shift they start from, with a perfect fitness. Two measures read this
-off the final pose (Gelfand et al., "Geometrically stable sampling for the ICP
-algorithm", 3DIM 2003; Zhang et al., "On degeneracy of optimization-based state
-estimation problems", ICRA 2016):
-
-  * the point-to-plane Hessian: sum over correspondences of J^T J, J = [(q - c) x n, n]
-    (q a cloud-1 point, n its normal, c their centroid), with the rotation part scaled
-    by the correspondences' RMS distance from c so that both parts are in metres, and
-    divided by their count (its eigenvalues sum to about 2). What it leaves of the
-    translation once rotation has done what it can (the Schur complement of the rotation
-    block) is the translation's constraint: a direction whose eigenvalue there is under
-    `MIN_CONSTRAINT` is a shift no surface resists;
-  * the verification's candidates: a distinct pose (`ransac.CANDIDATE_SEPARATION` away)
-    that fits the clouds within `EQUAL_FIT` of the best is another answer they barely
-    tell apart. Reported, not refused: among the project's real cross-sensor pairs one
-    that registers right had such a runner-up, while every free shift of a corridor,
-    tunnel or highway shows in the Hessian.
-
-`information_matrix` is Open3D's `get_information_matrix_from_point_clouds` (point-to-
-point, (rx, ry, rz, tx, ty, tz) order, target points): what Open3D's pose-graph
-optimisation takes for an edge.
+Two scans of a straight corridor, a tunnel or a road between barriers see walls whose
+normals are all across the way: a shift along it leaves every point-to-plane residual
+unchanged, so RANSAC and ICP return whichever shift they start from, with a perfect
+fitness. The point-to-plane Hessian at the final pose shows it (Gelfand et al., 3DIM 2003;
+Zhang et al., ICRA 2016): sum over correspondences of J^T J, J = [(q - c) x n, n] (q a
+cloud-1 point, n its normal, c their centroid; rotation scaled by their RMS distance from
+c so both parts are in metres), divided by their count. Its Schur complement of the
+rotation block is the translation's constraint: a direction whose eigenvalue there is
+under `MIN_CONSTRAINT` is a shift no surface resists. `information_matrix` is Open3D's
+`get_information_matrix_from_point_clouds` ((rx, ry, rz, tx, ty, tz), target points), what
+Open3D's pose-graph optimisation takes for an edge.
 """
 
 from __future__ import annotations
@@ -33,7 +21,7 @@ import dataclasses
 
 import numpy as np
 
-from ssd_jax.registration import icp, ransac
+from ssd_jax.registration import icp
 
 # Metres: correspondences within this distance at the final pose (the verification's last
 # ICP distance).
@@ -44,9 +32,6 @@ DISTANCE = 0.5
 # pairs of the project's sets that register, real and synthetic, no less than 0.016
 # (docs/registration.md: degenerate scenes). The bound sits between, 2-3 times from each.
 MIN_CONSTRAINT = 0.0075
-# A candidate whose fitness is this close to the best's, at least
-# ransac.CANDIDATE_SEPARATION from it, is counted (`PoseUncertainty.equal_candidates`).
-EQUAL_FIT = 0.01
 # Fewer correspondences than this at the final pose: the pose is fixed by almost nothing.
 MIN_CORRESPONDENCES = 30
 
@@ -64,7 +49,6 @@ class PoseUncertainty:
   translation_directions: [3, 3] its unit eigenvectors as rows (x, y, z).
   scale: metres, the RMS distance of the correspondences from their centroid.
   correspondences: cloud-2 points with a cloud-1 point within DISTANCE at the pose.
-  equal_candidates: distinct verified candidates fitting within EQUAL_FIT of the best.
   """
   information: np.ndarray
   eigenvalues: np.ndarray
@@ -73,7 +57,6 @@ class PoseUncertainty:
   translation_directions: np.ndarray
   scale: float
   correspondences: int
-  equal_candidates: int = 0
 
   @property
   def free(self) -> str:
@@ -94,8 +77,7 @@ class PoseUncertainty:
             'translation_constraint': self.translation_constraint.tolist(),
             'least_fixed_translation': self.translation_directions[0].tolist(),
             'scale_m': self.scale,
-            'correspondences': self.correspondences,
-            'equal_candidates': self.equal_candidates}
+            'correspondences': self.correspondences}
 
 
 def describe_direction(direction: np.ndarray) -> str:
@@ -112,26 +94,19 @@ def describe_direction(direction: np.ndarray) -> str:
 
 
 def assess(target: icp.Surface, source: np.ndarray, transform: np.ndarray,
-           candidates: np.ndarray | None = None, fitness: np.ndarray | None = None,
            origin: np.ndarray | None = None, distance: float = DISTANCE) -> PoseUncertainty:
   """What cloud 1 (`target`) and cloud 2's points source [M, 3] metres fix of the pose T_12
   [4, 4], from their correspondences within `distance` at it: Open3D's information
   matrix (about `origin` [3], cloud 1's frame origin in these coordinates, default 0) and
-  the scaled point-to-plane Hessian's eigen-decomposition; given the verification's
-  candidates [k, 4, 4] (refined) and their fitness [k], how many distinct ones fit as
-  well as the best."""
+  the scaled point-to-plane Hessian's eigen-decomposition."""
   moved = np.asarray(source, np.float64) @ transform[:3, :3].T + transform[:3, 3]
   found, idx, _ = icp.correspondences(target, moved, distance)
   idx = idx[found]
-  equal = 0
-  if candidates is not None and len(candidates) > 1:
-    order = ransac.distinct_best(candidates, fitness, len(candidates))
-    equal = sum(1 for c in order[1:] if fitness[c] >= fitness[order[0]] - EQUAL_FIT)
   q = target.points[idx]
   information = information_matrix(q if origin is None else q - origin)
   if len(idx) < MIN_CORRESPONDENCES:
     return PoseUncertainty(information, np.zeros(6), np.eye(6), np.zeros(3), np.eye(3), 0.0,
-                           len(idx), equal)
+                           len(idx))
   n = target.normals_at(idx)
   r = q - q.mean(0)
   scale = float(np.sqrt(np.mean(np.sum(r * r, 1)))) or 1.0
@@ -143,7 +118,7 @@ def assess(target: icp.Surface, source: np.ndarray, transform: np.ndarray,
   schur = hessian[3:, 3:] - hessian[3:, :3] @ np.linalg.pinv(hessian[:3, :3]) @ hessian[:3, 3:]
   t_values, t_vectors = np.linalg.eigh((schur + schur.T) / 2)
   return PoseUncertainty(information, values, vectors.T, t_values, t_vectors.T, scale,
-                         len(idx), equal)
+                         len(idx))
 
 
 def information_matrix(partners: np.ndarray) -> np.ndarray:

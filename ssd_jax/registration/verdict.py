@@ -2,26 +2,23 @@
 
 Every registration returns a pose; many real pairs (scans far apart, half overlapping, a
 solid-state unit facing elsewhere) have no right one to find, and a wrong pose looks like
-a right one by its fitness alone: the ground fits every upright pose. The verdict reads
-five things of the final pose, each a reason to refuse it:
+a right one by its fitness alone: the ground fits every upright pose. Each of these
+refuses the final pose:
 
-  * 'degenerate': the scans leave part of the pose free (a corridor, a tunnel:
-    `uncertainty.PoseUncertainty.free`);
+  * 'degenerate': the scans leave part of the pose free (`uncertainty.PoseUncertainty.free`);
   * 'free-space conflict': more than MAX_CONFLICT of one scan's structure lies where the
-    other scan's laser passed through (`free_space.conflict`). Right poses on the
-    development drives conflict 0.005-0.08 outdoors (moving cars and people; up to 0.14
-    indoors among people), wrong ones 0.12-0.5;
+    other scan's laser passed through (`free_space.conflict`);
   * 'low overlap': under MIN_FITNESS of cloud 2's structure lies within
-    `verification.FIT_DISTANCE` of cloud 1: too little is shared for the pose to rest on;
+    `verification.FIT_DISTANCE` of cloud 1;
   * 'ambiguous candidates': a distinct pose (`ransac.CANDIDATE_SEPARATION` away) that also
     passes the free-space check fits within AMBIGUOUS_MARGIN of the best;
-  * 'unsupported': fewer of the descriptor matches than one RANSAC sample (MIN_SUPPORT)
-    agree with the pose (it came from the bird's-eye-view search or an ICP's slide), and
-    the geometry alone is not conclusive either (under SUPPORTED_FITNESS).
+  * 'unsupported': fewer descriptor matches than one RANSAC sample (MIN_SUPPORT) agree
+    with the pose (from the bird's-eye-view search or an ICP's slide), and under
+    SUPPORTED_FITNESS of the structure fits.
 
 Thresholds are round numbers between the right and the wrong poses' values on the
-development drives (docs/notes/real_drives.md: the verdict, with its precision and recall);
-free space is judged only where both scans are in their sensors' frames
+development drives (docs/notes/real_drives.md: the values, the verdict's precision and
+recall); free space is judged only where both scans are in their sensors' frames
 (`free_space.sensor_centred`).
 """
 
@@ -33,6 +30,8 @@ import numpy as np
 
 from ssd_jax.registration import prepared, ransac, verification
 
+# Right poses on the development drives conflict 0.005-0.08 outdoors (moving cars and
+# people; up to 0.14 indoors among people), wrong ones 0.12-0.5.
 MAX_CONFLICT = 0.1
 # Right poses 20-30 m apart on a real road lay 0.16-0.17 of cloud 2's structure on cloud 1.
 MIN_FITNESS = 0.15

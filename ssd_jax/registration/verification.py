@@ -64,10 +64,9 @@ SAME_START = (0.5, 1.0)
 # (docs/registration.md: the register defaults' candidates).
 CONFIDENT_FITNESS = 0.5
 # A pose that ends the search early (`pair_stages.coarse_to_fine`'s coarse level) must be
-# confident and clearly best: no candidate at least ransac.CANDIDATE_SEPARATION from it
-# fits within FINE_MARGIN of it. A real front-view (120 degree) re-scan's coarse level
-# verified a pose 1.8 m and 5 degrees off at 0.82 beside a distinct one at 0.76; from all
-# the keypoints the right pose fits 1.0.
+# confident and clearly best: no candidate ransac.CANDIDATE_SEPARATION from it fits within
+# FINE_MARGIN of it (a real 120-degree re-scan's coarse level verified a pose 1.8 m off at
+# 0.82 beside a distinct one at 0.76).
 
 
 def clearly_confident(poses: np.ndarray, fitness: np.ndarray,

@@ -314,7 +314,6 @@ def _write_test_oxford(config, out: Path, tick) -> int:
   return len(all_pairs)
 
 
-
 def _crop_cluster(rng, points, normals, center, radius):
   """Points within `radius` of center, relative to it, in a random z-rotated frame."""
   inside = np.linalg.norm(points - center, axis=1) < radius
