@@ -133,8 +133,9 @@ class Options:
   @property
   def retries(self) -> tuple[str, ...]:
     """The tries of `retry` that apply: none unless the descriptor is learned and the
-    poses verified (`pipeline.Registrar` skips 'learned' where the first try already
-    samples as the model was trained)."""
+    poses verified (`pipeline.Registrar` skips each learned try the first one already
+    is: 'structure' where the keypoints are not 'auto' or the model's own lie there,
+    'learned' where the first try samples as the model was trained)."""
     return self.retry if self.descriptor == 'learned' and self.verify > 0 else ()
 
   @property
