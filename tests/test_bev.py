@@ -6,25 +6,37 @@ import pytest
 from ssd_jax import geometry
 from ssd_jax.data import io
 from ssd_jax.registration import bev, metrics, verification
-from ssd_jax.registration import cloud_features, pair_stages
+from ssd_jax.registration import cloud_features, pair_stages, prepared
 from tests.conftest import shared_path
 
 
-def test_structure_image_keeps_what_rises_from_sloped_ground_and_drops_the_ground():
-  """Ground rising 5 % along x (a hill: 2 m over 40 m) leaves no cell; a 3 m pole at
-  (10, -5) leaves its cell, the image's peak."""
+def test_band_images_keep_what_rises_from_sloped_ground_and_drop_the_ground():
+  """Ground rising 5 % along x (a hill: 2 m over 40 m) and a pole at (10, -5) rising
+  0.55-3.45 m above its local ground (the lowest within ~6 m: 0.2 m, at x = 4). As cloud
+  2 the pole is its structure and no ground point is; banded, its points from 1 m up,
+  each in its band; as cloud 1 the pole fills the bands its heights reach
+  (within BAND_MARGIN), there only within REACH of its cell, and the ground none."""
   x, y = np.meshgrid(np.arange(-20, 20, 0.2), np.arange(-20, 20, 0.2))
   ground = np.stack([x.ravel(), y.ravel(), 0.05 * x.ravel()], 1)
-  pole = np.stack([np.full(30, 10.0), np.full(30, -5.0), 0.5 + np.arange(30) * 0.1], 1)
-  image = bev.structure_image(np.concatenate([ground, pole]))
+  heights = 0.55 + np.arange(30) * 0.1
+  pole = np.stack([np.full(30, 10.0), np.full(30, -5.0), 0.2 + heights], 1)
+  f = bev.footprint(np.concatenate([ground, pole]))
+  rising, band = f.structure()   # the structure images': what rises HEIGHT above the ground
+  assert len(rising) == 30 and not band.any()
+  xy, band = f.structure(banded=True)
+  np.testing.assert_allclose(xy + f.centre[:2], np.tile([10.0, -5.0], (len(xy), 1)))
+  assert len(xy) == np.sum(heights >= 1.0) == 25
+  np.testing.assert_array_equal(np.bincount(band), [15, 10])   # 1-2.5 m, 2.5-4 m
+  images = bev.reach_images(f)
   size = bev._size(bev.EXTENT, bev.RESOLUTION)
-  assert image.shape == (size, size)
-  peak = np.unravel_index(np.argmax(image), image.shape)
-  assert peak == (size // 2 + 20, size // 2 - 10)     # 10 m, -5 m at 0.5 m per cell
-  far = np.ones_like(image, bool)
-  far[peak[0] - 5:peak[0] + 6, peak[1] - 5:peak[1] + 6] = False
-  assert image[far].max() == 0.0
-  assert not bev.structure_image(ground).any()
+  assert images.shape == (len(bev.BANDS) - 1, size, size)
+  cell = np.floor((np.array([10.0, -5.0]) - f.centre[:2]) / bev.RESOLUTION).astype(int) + size // 2
+  assert images[0][tuple(cell)] and images[1][tuple(cell)] and not images[2].any()
+  filled = np.argwhere(images[0])
+  assert np.abs(filled - cell).max() <= np.ceil(bev.REACH / bev.RESOLUTION)
+  assert not bev.reach_images(bev.footprint(ground)).any()
+  assert not len(bev.footprint(ground).structure()[0])
+  assert not len(bev.footprint(ground).structure(banded=True)[0])
 
 
 def _pair(yaw_deg: float, shift) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -53,6 +65,24 @@ def test_search_finds_a_pose_turned_and_shifted_anywhere_on_a_real_scan():
   np.testing.assert_array_equal(found.transforms, bev.search(cloud1, cloud2, k=3).transforms)
   with pytest.raises(ValueError, match='yaw_step > 0'):
     bev.search(cloud1, cloud2, yaw_step=0)
+
+
+@pytest.mark.real_data
+@pytest.mark.slow
+def test_banded_search_and_its_ranked_poses_find_a_pose_turned_and_shifted_on_a_real_scan():
+  """The banded scoring finds the turned and shifted scan as the structure images do; the
+  'bev' retry's poses are the structure images' 3 and the banded ones, ranked, first the
+  right one."""
+  cloud1, cloud2, t_true = _pair(137.0, [14.0, -9.0, 0.3])
+  found = bev.search(cloud1, cloud2, k=3, banded=True)
+  assert np.all(np.diff(found.scores) <= 0)
+  pair = prepared.PreparedPair(cloud1, cloud2)
+  both = pair.bev_poses(3, banded=True)
+  assert both.shape == (6, 4, 4)
+  np.testing.assert_array_equal(both[:3], bev.search(cloud1, cloud2, k=3).transforms)
+  for pose in (found.transforms[0], both[3]):
+    assert metrics.registration_errors(t_true, pose)['rre_geodesic'] < bev.YAW_STEP / 2 + 0.1
+    assert np.linalg.norm(pose[:2, 3] - t_true[:2, 3]) < bev.RESOLUTION
 
 
 @pytest.mark.real_data

@@ -5,10 +5,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ssd_jax import inference, pretrained
+from ssd_jax import geometry, inference, pretrained
 from ssd_jax.data import clean, groundtruth, io, kitti
 from ssd_jax.infra import errors
-from ssd_jax.registration import free_space, metrics, outputs, pipeline, prepared, verdict
+from ssd_jax.registration import bev, free_space, metrics, outputs, pipeline, prepared, verdict
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
 
@@ -178,6 +178,30 @@ def test_a_refused_pose_is_registered_again_with_keypoints_on_the_structure(monk
 
 
 @pytest.mark.real_data
+def test_a_refused_pose_is_registered_again_with_the_banded_bev_search(monkeypatch):
+  """Where the descriptors fail (noise in their place) and the structure images' BEV
+  search offers only poses 15 m off, the first pose is refused; the 'bev' retry verifies
+  the banded search's ranked poses with the same candidates and keeps a right one,
+  trusted."""
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  monkeypatch.setattr(inference, 'describe', lambda model, points, at, **kw: (
+      np.random.default_rng(len(points)).normal(size=(len(at), 32)).astype(np.float32)))
+  search = bev.search
+  off = geometry.make_transform(np.eye(3), np.array([15.0, 0.0, 0.0]))
+  monkeypatch.setattr(bev, 'search', lambda *a, banded=False, **kw: (
+      search(*a, banded=True, **kw) if banded else bev.BevResult(
+          np.stack([t12 @ off] * 2), np.ones(2))))
+  run = lambda retry: pipeline.register(target=cloud1, source=cloud2,
+                                        model=pretrained.load(pretrained.DEFAULT),
+                                        options=options_lib.Options(retry=retry))[0]
+  first, again = run('none'), run('bev')
+  assert not first.verdict.registered
+  assert not metrics.registration_errors(t12, first.transform)['success']
+  assert again.verdict.registered and metrics.registration_errors(t12, again.transform)['success']
+  assert pipeline.RETRY_NOTES['bev'].format(first.verdict.reason) in again.notes
+
+
+@pytest.mark.real_data
 def test_a_refused_pose_is_registered_again_with_the_models_own_sampling(monkeypatch):
   """Where the first try's sampling of each ball (one of 32 points) fails on a pair (here
   noise in its place), the retry describes the clouds as the model was trained (its own
@@ -198,9 +222,10 @@ def test_a_refused_pose_is_registered_again_with_the_models_own_sampling(monkeyp
   # samples each ball as the model was trained, from the structure.
   retries = lambda m, **kw: list(pipeline.Registrar(  # pylint: disable=protected-access
       lambda key: cloud1, model=m, options=options_lib.Options(**kw))._retries)
-  assert retries(model) == ['structure', 'learned', 'fpfh']
-  assert retries(model, draws=0) == ['structure', 'fpfh']
-  assert retries(dataclasses.replace(model, keypoints='structure'), draws=0) == ['fpfh']
-  assert retries(model, keypoints='iss') == ['learned', 'fpfh']
+  assert retries(model) == ['structure', 'learned', 'fpfh', 'bev']
+  assert retries(model, draws=0) == ['structure', 'fpfh', 'bev']
+  assert retries(dataclasses.replace(model, keypoints='structure'), draws=0) == ['fpfh', 'bev']
+  assert retries(model, keypoints='iss') == ['learned', 'fpfh', 'bev']
+  assert retries(model, bev=0) == ['structure', 'learned', 'fpfh']   # no BEV search
   with pytest.raises(errors.UserError, match='retry'):
     options_lib.Options(retry='learned,sift')

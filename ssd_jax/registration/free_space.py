@@ -111,17 +111,22 @@ def sensor_centred(points: np.ndarray) -> bool:
               and np.median(horizontal) < MAX_MEDIAN_RANGE)
 
 
-def best(fitness: np.ndarray, conflict: Callable[[int], float | None]) -> int:
-  """Which of a verification's candidates (fitness [k]) to take: the highest fitness less
-  CONFLICT_WEIGHT times its conflict (`conflict(c)`, None where free space cannot be
-  judged: then fitness alone). Ties keep the earlier candidate."""
+def ranked(fitness, conflict: Callable[[int], float | None]) -> np.ndarray:
+  """Candidates (fitness [k]) best first, as the verification picks them: by fitness less
+  CONFLICT_WEIGHT times their conflict (`conflict(c)`, None where free space cannot be
+  judged: then by fitness alone). Ties keep the earlier candidate first."""
   scores = np.asarray(fitness, np.float64).copy()
   for c in range(len(scores)):
     share = conflict(c)
     if share is None:
-      return int(np.argmax(fitness))
+      return np.argsort(-np.asarray(fitness, np.float64), kind='stable')
     scores[c] -= CONFLICT_WEIGHT * share
-  return int(np.argmax(scores))
+  return np.argsort(-scores, kind='stable')
+
+
+def best(fitness: np.ndarray, conflict: Callable[[int], float | None]) -> int:
+  """The first of `ranked`: which of a verification's candidates to take."""
+  return int(ranked(fitness, conflict)[0])
 
 
 def conflict(image1: RangeImage, image2: RangeImage, points1: np.ndarray, points2: np.ndarray,

@@ -19,9 +19,9 @@ ESTIMATORS = ('rigid', 'upright')
 # (docs/registration.md).
 SAMPLINGS = ('auto', 'compatible', 'uniform')
 LEVELS = ('none', 'ground')
-# Keypoints and descriptors that fail on different pairs: where one's candidates hold no
-# right pose, another's sometimes do (docs/notes/real_drives.md).
-RETRIES = ('structure', 'learned', 'fpfh')
+# Keypoints, descriptors and whole-scene searches that fail on different pairs: where one's
+# candidates hold no right pose, another's sometimes do (docs/notes/real_drives.md).
+RETRIES = ('structure', 'learned', 'fpfh', 'bev')
 
 
 # How the learned descriptor samples each ball where the poses are verified (the register
@@ -61,6 +61,8 @@ class Options:
               (`verification`); 0 keeps RANSAC's best as it is.
   bev         the bird's-eye-view search's this many best poses checked with them, where
               they apply: upright estimator and verify > 0 (`bev_candidates`).
+  bev_banded  the banded BEV search's best poses, ranked as the verification picks, join
+              the BEV search's (`prepared.PreparedPair.bev_poses`): the 'bev' retry's.
   icp         point-to-plane ICP from the chosen pose (1 m, then 0.5 m).
   draws       samplings of each ball the learned descriptor averages: None,
               VERIFIED_DRAWS of VERIFIED_SAMPLES points where verify > 0, else the
@@ -81,7 +83,9 @@ class Options:
               refuses is registered again with each until one is trusted (`retries`):
               'structure' (keypoints from the points above the ground,
               `cloud_features.keypoint_domain`), 'learned' (the model's own sampling of
-              its balls), 'fpfh' (the classical descriptor).
+              its balls), 'fpfh' (the classical descriptor), 'bev' (the first try's
+              descriptors, with the banded BEV search's poses: `bev_banded`; where
+              `bev_candidates` apply).
   """
   keypoints: str = 'auto'
   descriptor: str = 'learned'
@@ -96,6 +100,7 @@ class Options:
   level: str = 'ground'
   sampling: str = 'auto'
   retry: tuple[str, ...] = RETRIES
+  bev_banded: bool = False
 
   def __post_init__(self):
     if isinstance(self.retry, str):

@@ -109,7 +109,7 @@ def estimate(f1: Features, f2: Features, seed: int = 0, inlier_threshold: float 
 
 def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
            inlier_threshold: float = 1.0, bev_candidates: int = 0,
-           confident_only: bool = False) -> Registration:
+           confident_only: bool = False, bev_banded: bool = False) -> Registration:
   """`reg` with the candidate pose (`estimate(candidates=k)`) that, refined by ICP, lays the
   most of cloud 2's structure on cloud 1 (`verification.verify`). points1, points2: the
   clouds [N, 3] (metres near the origin, in the features' coordinates) or their
@@ -118,9 +118,11 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
   poses and every ICP for the pair's next registration. With `bev_candidates` b > 0
   (upright scans), unless RANSAC's best already lays `verification.CONFIDENT_FITNESS` of
   cloud 2's structure on cloud 1, the b best poses of the bird's-eye-view search
-  (`bev.search`) are checked too, after RANSAC's, all together. Inliers and the
-  RegistrationResult numbers are recounted over the matches under the chosen pose;
-  `verified_fitness` has one entry per candidate checked (k, or k + b); `seconds` gains
+  (`bev.search`; `bev_banded`: and b of its banded search, ranked as the verification
+  picks, `prepared.PreparedPair.bev_poses`) are checked too, after RANSAC's, all
+  together. Inliers and the RegistrationResult numbers are recounted over the matches
+  under the chosen pose; `verified_fitness` has one entry per candidate checked (k,
+  k + b, or k + 2b); `seconds` gains
   'bev' (0 where it was not needed) and 'verify'. `confident_only`: only a pose fitting
   CONFIDENT_FITNESS is of use (no BEV search then): candidates far from it are not
   refined in full (`verification.verify`); so it is for RANSAC's candidates alone before
@@ -142,7 +144,7 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
     seconds['bev'] = 0.0
     if fitness[best] < verification.CONFIDENT_FITNESS:
       t1 = time.perf_counter()
-      candidates = np.concatenate([candidates, pair.bev_poses(bev_candidates)])
+      candidates = np.concatenate([candidates, pair.bev_poses(bev_candidates, bev_banded)])
       t2 = time.perf_counter()
       best, refined, fitness = verification.verify(target, source, candidates,
                                                    memo=pair.memo, choose=choose)
@@ -160,7 +162,7 @@ def coarse_to_fine(levels1: Sequence[Callable[[], Features]],
                    seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
                    max_trials: int = 10_000, estimator: str = 'upright', candidates: int = 10,
                    bev_candidates: int = 0, verified: bool = True, progress=None,
-                   sampling: str = 'auto'
+                   sampling: str = 'auto', bev_banded: bool = False
                    ) -> tuple[Registration, Features, Features]:
   """`estimate` (`candidates` poses) and, where `verified`, `verify` on each level of the
   two clouds' features in turn (callables, coarse first: `FeatureLevels.levels`), until a
@@ -169,9 +171,9 @@ def coarse_to_fine(levels1: Sequence[Callable[[], Features]],
   The last level is the registration without levels, the BEV search's candidates
   included; the ones before only end it early (unverified, only the last level runs).
   points1, points2: as for `verify`; `progress(stage)` as for `register`, on the first
-  level tried; `sampling` as for `estimate`. -> (registration, features of cloud 1, of
-  cloud 2) of the level that decided, its `seconds` summed over the levels tried and
-  `levels_tried` set."""
+  level tried; `sampling` as for `estimate`, `bev_banded` as for `verify`.
+  -> (registration, features of cloud 1, of cloud 2) of the level that decided, its
+  `seconds` summed over the levels tried and `levels_tried` set."""
   if not levels1 or len(levels1) != len(levels2):
     raise ValueError(f'the clouds have {len(levels1)} and {len(levels2)} feature levels')
   first = 0 if verified else len(levels1) - 1
@@ -190,7 +192,7 @@ def coarse_to_fine(levels1: Sequence[Callable[[], Features]],
       if n == first:
         stage('verification')
       reg = verify(reg, f1, f2, pair, None, inlier_threshold, bev_candidates if last else 0,
-                   confident_only=not last)
+                   confident_only=not last, bev_banded=bev_banded)
     for name, s in reg.seconds.items():
       spent[name] = spent.get(name, 0.0) + s
     if last or verification.clearly_confident(reg.verified_poses, reg.verified_fitness):

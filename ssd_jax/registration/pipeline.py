@@ -36,7 +36,9 @@ RETRY_NOTES = {'structure': 'registered again with keypoints on the structure ab
                'learned': 'registered again with the learned descriptors sampled as the '
                           'model was trained, the first pose refused ({})',
                'fpfh': "registered again with FPFH descriptors, the learned ones' pose "
-                       'refused ({})'}
+                       'refused ({})',
+               'bev': "registered again with the banded BEV search's poses, the first pose "
+                      'refused ({})'}
 # The features of the retries with the learned descriptors, as `_Cloud.features` keeps them.
 OWN_SAMPLING = 'learned, own sampling'
 ON_STRUCTURE = 'learned, keypoints on the structure'
@@ -126,7 +128,11 @@ class Registrar:
     # the first differs from it (keypoints from every point; balls sampled otherwise).
     self._retries = {}
     for name in self._options.retries:
-      if name == 'fpfh':
+      if name == 'bev':
+        if self._options.bev_candidates:
+          self._retries[name] = (self._options.descriptor,
+                                 dataclasses.replace(self._options, bev_banded=True), None)
+      elif name == 'fpfh':
         self._retries[name] = ('fpfh', dataclasses.replace(self._options, descriptor='fpfh'),
                                None)
       elif name == 'structure' and self._options.keypoints == 'auto' and (
@@ -283,7 +289,7 @@ class Registrar:
         pair_levels[0].levels, pair_levels[1].levels, pair, seed=options.seed,
         estimator=options.estimator, candidates=max(options.verify, 1),
         bev_candidates=options.bev_candidates, verified=options.verify > 0,
-        progress=self._stage, sampling=options.sampling)
+        progress=self._stage, sampling=options.sampling, bev_banded=options.bev_banded)
     try:
       reg, f1, f2 = run(levels)
     except ValueError as err:   # ISS keypoints that leave RANSAC nothing to sample

@@ -56,6 +56,14 @@ def prepare(points) -> PreparedCloud:
   return points if isinstance(points, PreparedCloud) else PreparedCloud(points)
 
 
+# The banded BEV search's distinct poses `PreparedPair.bev_poses` ranks before it keeps
+# its k: on a narrow unit's far pairs the correlation ranks the right pose 10th-40th, where
+# its structure's share near cloud 1 less the conflict ranks it among the first three
+# (docs/notes/real_drives.md). Not the first try's ranking: a coarse pose of a sparse
+# unit's scan can conflict 25 %, and the right one drops out.
+BEV_POOL = 50
+
+
 class PreparedPair:
   """Cloud 1 (the target) and cloud 2 (the source, moved onto it) as `PreparedCloud`s,
   with `memo`, what is made of the two together: the verification's ICP and fitness per
@@ -79,11 +87,24 @@ class PreparedPair:
                                            self.cloud2.source.scored, transform)
     return self.memo[key]
 
-  def bev_poses(self, k: int) -> np.ndarray:
-    """The k best T_12 [k, 4, 4] of `bev.search` on the two footprints."""
-    key = ('bev', k)
+  def bev_poses(self, k: int, banded: bool = False) -> np.ndarray:
+    """The k best T_12 [k, 4, 4] of `bev.search` on the two footprints; `banded`: those and
+    the k first [2k, 4, 4] of its banded search's BEV_POOL best, ranked as the
+    verification picks (`free_space.ranked`: the share of cloud 2's structure within
+    `verification.PRESCORE_DISTANCE` of cloud 1 less the conflict). A retry with the
+    banded poses thus keeps every candidate of the first try, and the verdict sees a
+    first pose that fits as well as the new one (`verdict.assess`: ambiguous)."""
+    key = ('bev', k, banded)
     if key not in self.memo:
-      self.memo[key] = bev.search(self.cloud1.footprint, self.cloud2.footprint, k).transforms
+      f1, f2 = self.cloud1.footprint, self.cloud2.footprint
+      if not banded:
+        self.memo[key] = bev.search(f1, f2, k).transforms
+      else:
+        poses = bev.search(f1, f2, max(k, BEV_POOL), banded=True).transforms
+        near = [verification.fitness(self.cloud1.target, self.cloud2.source.scored, t,
+                                     verification.PRESCORE_DISTANCE) for t in poses]
+        ranked = poses[free_space.ranked(near, lambda c: self.conflict(poses[c]))[:k]]
+        self.memo[key] = np.concatenate([self.bev_poses(k), ranked])
     return self.memo[key]
 
 
