@@ -70,17 +70,14 @@ def test_search_finds_a_pose_turned_and_shifted_anywhere_on_a_real_scan():
 @pytest.mark.real_data
 @pytest.mark.slow
 def test_banded_search_and_its_ranked_poses_find_a_pose_turned_and_shifted_on_a_real_scan():
-  """The banded scoring finds the turned and shifted scan as the structure images do; the
-  'bev' retry's poses are the structure images' 3 and the banded ones, ranked, first the
-  right one."""
+  """The banded scoring finds the turned and shifted scan as the structure images do, and
+  its poses ranked as the verification picks (the 'bev' retry's) start with it."""
   cloud1, cloud2, t_true = _pair(137.0, [14.0, -9.0, 0.3])
   found = bev.search(cloud1, cloud2, k=3, banded=True)
   assert np.all(np.diff(found.scores) <= 0)
-  pair = prepared.PreparedPair(cloud1, cloud2)
-  both = pair.bev_poses(3, banded=True)
-  assert both.shape == (6, 4, 4)
-  np.testing.assert_array_equal(both[:3], bev.search(cloud1, cloud2, k=3).transforms)
-  for pose in (found.transforms[0], both[3]):
+  ranked = prepared.PreparedPair(cloud1, cloud2).bev_poses(3, banded=True)
+  assert ranked.shape == (3, 4, 4)
+  for pose in (found.transforms[0], ranked[0]):
     assert metrics.registration_errors(t_true, pose)['rre_geodesic'] < bev.YAW_STEP / 2 + 0.1
     assert np.linalg.norm(pose[:2, 3] - t_true[:2, 3]) < bev.RESOLUTION
 

@@ -181,8 +181,8 @@ def test_a_refused_pose_is_registered_again_with_keypoints_on_the_structure(monk
 def test_a_refused_pose_is_registered_again_with_the_banded_bev_search(monkeypatch):
   """Where the descriptors fail (noise in their place) and the structure images' BEV
   search offers only poses 15 m off, the first pose is refused; the 'bev' retry verifies
-  the banded search's ranked poses with the same candidates and keeps a right one,
-  trusted."""
+  the banded search's 5 ranked poses beside every candidate of the first try and keeps a
+  right one, trusted."""
   cloud1, cloud2, t12 = _drive_pair(0, 7)
   monkeypatch.setattr(inference, 'describe', lambda model, points, at, **kw: (
       np.random.default_rng(len(points)).normal(size=(len(at), 32)).astype(np.float32)))
@@ -199,6 +199,7 @@ def test_a_refused_pose_is_registered_again_with_the_banded_bev_search(monkeypat
   assert not metrics.registration_errors(t12, first.transform)['success']
   assert again.verdict.registered and metrics.registration_errors(t12, again.transform)['success']
   assert pipeline.RETRY_NOTES['bev'].format(first.verdict.reason) in again.notes
+  assert len(again.verified_fitness) == len(first.verified_fitness) + 5
 
 
 @pytest.mark.real_data

@@ -144,7 +144,12 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
     seconds['bev'] = 0.0
     if fitness[best] < verification.CONFIDENT_FITNESS:
       t1 = time.perf_counter()
-      candidates = np.concatenate([candidates, pair.bev_poses(bev_candidates, bev_banded)])
+      # The banded poses join the first try's rather than replace them, so the verdict
+      # sees a first pose that fits as well as a new one (`verdict.assess`: ambiguous).
+      bev_poses = [pair.bev_poses(bev_candidates)]
+      if bev_banded:
+        bev_poses.append(pair.bev_poses(bev_candidates, banded=True))
+      candidates = np.concatenate([candidates, *bev_poses])
       t2 = time.perf_counter()
       best, refined, fitness = verification.verify(target, source, candidates,
                                                    memo=pair.memo, choose=choose)

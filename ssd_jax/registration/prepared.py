@@ -88,12 +88,10 @@ class PreparedPair:
     return self.memo[key]
 
   def bev_poses(self, k: int, banded: bool = False) -> np.ndarray:
-    """The k best T_12 [k, 4, 4] of `bev.search` on the two footprints; `banded`: those and
-    the k first [2k, 4, 4] of its banded search's BEV_POOL best, ranked as the
-    verification picks (`free_space.ranked`: the share of cloud 2's structure within
-    `verification.PRESCORE_DISTANCE` of cloud 1 less the conflict). A retry with the
-    banded poses thus keeps every candidate of the first try, and the verdict sees a
-    first pose that fits as well as the new one (`verdict.assess`: ambiguous)."""
+    """The k best T_12 [k, 4, 4] of `bev.search` on the two footprints; `banded`: the k
+    first of its banded search's BEV_POOL best, ranked as the verification picks
+    (`free_space.ranked`: the share of cloud 2's structure within
+    `verification.PRESCORE_DISTANCE` of cloud 1 less the conflict)."""
     key = ('bev', k, banded)
     if key not in self.memo:
       f1, f2 = self.cloud1.footprint, self.cloud2.footprint
@@ -103,8 +101,7 @@ class PreparedPair:
         poses = bev.search(f1, f2, max(k, BEV_POOL), banded=True).transforms
         near = [verification.fitness(self.cloud1.target, self.cloud2.source.scored, t,
                                      verification.PRESCORE_DISTANCE) for t in poses]
-        ranked = poses[free_space.ranked(near, lambda c: self.conflict(poses[c]))[:k]]
-        self.memo[key] = np.concatenate([self.bev_poses(k), ranked])
+        self.memo[key] = poses[free_space.ranked(near, lambda c: self.conflict(poses[c]))[:k]]
     return self.memo[key]
 
 
