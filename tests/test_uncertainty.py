@@ -36,8 +36,14 @@ def test_information_matrix_is_open3ds():
   np.testing.assert_allclose(shifted.information, expected, rtol=0,
                              atol=1e-5 * np.abs(expected).max())
   # A real street fixes every direction, well above the bound.
-  assert not assessed.free and assessed.translation_constraint[0] > 5 * uncertainty.MIN_CONSTRAINT
+  held = assessed.translation_constraint[0]
+  assert not assessed.free and held > 5 * uncertainty.MIN_CONSTRAINT
   assert assessed.correspondences > 10_000
+  # Under a stricter bound than what holds its least held shift, that shift is named.
+  assert assessed.free_under(0.99 * held) == ''
+  stricter = assessed.free_under(1.01 * held)
+  assert stricter.startswith('translation along (') and (
+      f'{held:.2g} per correspondence, under {1.01 * held:g}') in stricter, stricter
 
 
 @pytest.mark.parametrize('kind', degenerate.KINDS)
@@ -52,6 +58,7 @@ def test_a_shift_along_a_corridor_tunnel_or_highway_is_free(kind):
   u = reg.uncertainty
   assert u.translation_constraint[0] < uncertainty.MIN_CONSTRAINT, u.translation_constraint
   assert u.free.startswith('translation along (1.00, ') and 'not fixed' in u.free, u.free
+  assert f'under {uncertainty.MIN_CONSTRAINT:g}' in u.free, u.free
   assert abs(u.translation_directions[0][0]) > 0.99
   # The truth is no better fixed: the same direction is free there.
   grid1, _ = cloud_features.to_grid(cloud1, 0.2)

@@ -8,7 +8,8 @@ import pytest
 from ssd_jax import geometry, inference, pretrained
 from ssd_jax.data import clean, groundtruth, io, kitti
 from ssd_jax.infra import errors
-from ssd_jax.registration import bev, free_space, metrics, outputs, pipeline, prepared, verdict
+from ssd_jax.registration import bev, free_space, metrics, outputs, pipeline, prepared
+from ssd_jax.registration import uncertainty, verdict
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
 
@@ -154,6 +155,16 @@ def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
   row = outputs.csv_row(pipeline.PairResult('a.bin', 'b.bin', again, f1, f1))   # a batch's
   assert note in row[outputs.CSV_HEADER.index('notes')]
   assert again.seconds['ransac'] > first.seconds['ransac']   # both tries are counted
+  # A retry's pose must hold every shift by verdict.RETRY_MIN_CONSTRAINT, 4x a first try's
+  # bound: asked for more than FPFH's pose holds, the retry is refused too, and the first
+  # refusal stands.
+  held = again.uncertainty.translation_constraint[0]
+  assert held >= verdict.RETRY_MIN_CONSTRAINT > uncertainty.MIN_CONSTRAINT
+  monkeypatch.setattr(verdict, 'RETRY_MIN_CONSTRAINT', 1.01 * held)
+  strict, _, _ = pipeline.register(target=cloud1, source=cloud2, model=model,
+                                   options=options_lib.Options(bev=0, retry='fpfh'))
+  assert not strict.verdict.registered and strict.verdict.reason == first.verdict.reason
+  np.testing.assert_array_equal(strict.transform, first.transform)
 
 
 @pytest.mark.real_data

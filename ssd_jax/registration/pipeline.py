@@ -17,8 +17,8 @@ import numpy as np
 
 from ssd_jax import geometry
 from ssd_jax.data.clean import check_cloud
-from ssd_jax.registration import cloud_features, leveling, pair_stages, prepared, verification
-from ssd_jax.registration import options as options_lib
+from ssd_jax.registration import cloud_features, leveling, pair_stages, prepared, uncertainty
+from ssd_jax.registration import options as options_lib, verdict as verdict_lib, verification
 
 Features = cloud_features.CloudFeatures
 
@@ -257,7 +257,8 @@ class Registrar:
     elif self._retries and not reg.verdict.registered:
       spent = collections.Counter(reg.seconds)   # every try's stages, as `any_rotation`'s
       for name, (key, options, model) in self._retries.items():
-        again, g1, g2 = self._upright(entries, pair, options, seconds, pair_name, key, model)
+        again, g1, g2 = self._upright(entries, pair, options, seconds, pair_name, key, model,
+                                      verdict_lib.RETRY_MIN_CONSTRAINT)
         spent.update(again.seconds)
         if again.verdict.registered:
           again.notes.append(RETRY_NOTES[name].format(reg.verdict.reason))
@@ -269,14 +270,15 @@ class Registrar:
 
   def _upright(self, entries: list[_Cloud], pair: prepared.PreparedPair,
                options: options_lib.Options, seconds: dict, pair_name: str,
-               key: str | None = None, model=None
+               key: str | None = None, model=None,
+               min_constraint: float = uncertainty.MIN_CONSTRAINT
                ) -> tuple[pair_stages.Registration, Features, Features]:
     """The pair (`pair`: its levelled clouds) registered upright with `options`'
     descriptor (a learned one with `model`, default the options' own; the clouds' levels
     kept under `key`, default the descriptor, made the first time they are asked for;
     ISS keypoints RANSAC cannot sample fall back to farthest-point ones), back in the
-    clouds' frames, ICP (`Options.icp`) and `assess`. The levels' keypoint and descriptor
-    seconds go to `seconds`."""
+    clouds' frames, ICP (`Options.icp`) and `assess` (`min_constraint` as there). The
+    levels' keypoint and descriptor seconds go to `seconds`."""
     key = key or options.descriptor
     for e in entries:
       if key not in e.features:
@@ -312,7 +314,8 @@ class Registrar:
       reg.transform, reg.icp_fitness = pair_stages.refine_icp(
           entries[0].own.points, entries[1].own.points, reg.transform)
       reg.seconds['icp'] = time.perf_counter() - t0
-    reg = pair_stages.assess(reg, entries[0].own, entries[1].own, origin=-entries[0].offset)
+    reg = pair_stages.assess(reg, entries[0].own, entries[1].own, origin=-entries[0].offset,
+                             min_constraint=min_constraint)
     return reg, f1, f2
 
 

@@ -61,12 +61,18 @@ class PoseUncertainty:
   @property
   def free(self) -> str:
     """'' when the scans fix the pose, else one line naming what they leave free."""
+    return self.free_under(MIN_CONSTRAINT)
+
+  def free_under(self, bound: float) -> str:
+    """`free` with `bound` in place of MIN_CONSTRAINT: '' when every shift is held by at
+    least `bound` per correspondence, else one line naming the least held."""
     if self.correspondences < MIN_CORRESPONDENCES:
       return (f'only {self.correspondences} points of cloud 2 lie within {DISTANCE:g} m of '
               'cloud 1 at the pose: the scans barely overlap there')
-    if self.translation_constraint[0] < MIN_CONSTRAINT:
+    if self.translation_constraint[0] < bound:
       return (f'{describe_direction(np.append(np.zeros(3), self.translation_directions[0]))}'
-              ' is not fixed by the scans (a corridor, tunnel or road between barriers?)')
+              f' is not fixed by the scans ({self.translation_constraint[0]:.2g} per '
+              f'correspondence, under {bound:g}: a corridor, tunnel or road between barriers?)')
     return ''
 
   def to_json(self) -> dict:

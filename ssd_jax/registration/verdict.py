@@ -5,7 +5,8 @@ solid-state unit facing elsewhere) have no right one to find, and a wrong pose l
 a right one by its fitness alone: the ground fits every upright pose. Each of these
 refuses the final pose:
 
-  * 'degenerate': the scans leave part of the pose free (`uncertainty.PoseUncertainty.free`);
+  * 'degenerate': the scans leave part of the pose free (`uncertainty.PoseUncertainty.free`;
+    for a pose found after the first was refused, `free_under(RETRY_MIN_CONSTRAINT)`);
   * 'free-space conflict': more than MAX_CONFLICT of one scan's structure lies where the
     other scan's laser passed through (`free_space.conflict`);
   * 'low overlap': under MIN_FITNESS of cloud 2's structure lies within
@@ -28,7 +29,7 @@ import dataclasses
 
 import numpy as np
 
-from ssd_jax.registration import prepared, ransac, verification
+from ssd_jax.registration import prepared, ransac, uncertainty, verification
 
 # Right poses on the development drives conflict 0.005-0.08 outdoors (moving cars and
 # people; up to 0.14 indoors among people), wrong ones 0.12-0.5.
@@ -41,6 +42,14 @@ AMBIGUOUS_MARGIN = 0.05
 # drive), wrong ones <= 0.21 (a hand-held Livox unit's pairs 17-28 m apart).
 MIN_SUPPORT = 2
 SUPPORTED_FITNESS = 0.35
+# A pose a retry found, after the first try's was refused (`Options.retry`), must hold every
+# shift by RETRY_MIN_CONSTRAINT per correspondence: 4x `uncertainty.MIN_CONSTRAINT`, 0.03.
+# The pairs that reach a retry share little, and there a wrong pose whose overlap holds a
+# shift along it only weakly fits and leaves free space as empty as a right one: on the
+# development drives (`ours_mined` and `ours`) the retries' wrong poses held 0.016-0.019
+# (four) and 0.035-0.051 (four), their right ones 0.057 or more. A first try's right pose
+# may hold less (0.02: a front-view unit on a road), so the bound is the retries' alone.
+RETRY_MIN_CONSTRAINT = 4 * uncertainty.MIN_CONSTRAINT
 REASONS = ('degenerate', 'free-space conflict', 'low overlap', 'ambiguous candidates',
            'unsupported')
 
