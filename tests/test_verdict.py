@@ -38,8 +38,8 @@ def test_a_pose_shifted_along_the_street_puts_structure_in_the_other_scans_free_
   # Cached per pose, and the same from a fresh pair (deterministic).
   assert pair.conflict(shifted) == wrong == prepared.PreparedPair(cloud1, cloud2).conflict(shifted)
   # The verification's pick among the two: the right one, though it fits less.
-  assert free_space.best(np.array([0.5, 0.45]), lambda c: (wrong, right)[c]) == 1
-  assert free_space.best(np.array([0.5, 0.45]), lambda c: None) == 0
+  assert free_space.ranked(np.array([0.5, 0.45]), lambda c: (wrong, right)[c])[0] == 1
+  assert free_space.ranked(np.array([0.5, 0.45]), lambda c: None)[0] == 0
 
 
 @pytest.mark.real_data

@@ -49,7 +49,7 @@ MAX_BLIND_SHARE = 0.005
 # Metres: a scan's median horizontal range is under this (a cloud in map coordinates, its
 # origin kilometres away, has no points near the origin either).
 MAX_MEDIAN_RANGE = 200.0
-# Where the verification picks among its candidates (`best`): fitness less this many times
+# Where the verification picks among its candidates (`ranked`): fitness less this many times
 # the conflict. Far apart along a street a wrong pose can lay more of cloud 2 on cloud 1
 # than the right one (the ground and the walls' lower parts overlap at any shift along
 # it: 0.33 against 0.15-0.26 on the development drives' failures 20-30 m apart) while it
@@ -122,11 +122,6 @@ def ranked(fitness, conflict: Callable[[int], float | None]) -> np.ndarray:
       return np.argsort(-np.asarray(fitness, np.float64), kind='stable')
     scores[c] -= CONFLICT_WEIGHT * share
   return np.argsort(-scores, kind='stable')
-
-
-def best(fitness: np.ndarray, conflict: Callable[[int], float | None]) -> int:
-  """The first of `ranked`: which of a verification's candidates to take."""
-  return int(ranked(fitness, conflict)[0])
 
 
 def conflict(image1: RangeImage, image2: RangeImage, points1: np.ndarray, points2: np.ndarray,

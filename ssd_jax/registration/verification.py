@@ -161,8 +161,8 @@ def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
   `confident_only`, where no coarse-aligned candidate fits within UNREFINED_MARGIN of
   CONFIDENT_FITNESS, none is refined in full (each keeps its coarse pose and fitness).
   `choose(poses [k, 4, 4], fitness [k]) -> index` picks the answer (default: the best
-  fitness, e.g. `free_space.best` instead); whichever it picks is refined in full, and
-  picked again from there."""
+  fitness; e.g. the first of `free_space.ranked` instead); whichever it picks is refined
+  in full, and picked again from there."""
   tgt = points1 if isinstance(points1, icp.Surface) else target(points1)
   if isinstance(points2, Source):
     if score_on != SCORE_ON:
