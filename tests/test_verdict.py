@@ -9,7 +9,7 @@ from ssd_jax import geometry, inference, pretrained
 from ssd_jax.data import clean, groundtruth, io, kitti
 from ssd_jax.infra import errors
 from ssd_jax.registration import bev, free_space, metrics, outputs, pipeline, prepared
-from ssd_jax.registration import uncertainty, verdict
+from ssd_jax.registration import uncertainty, verdict, verification
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
 
@@ -68,11 +68,33 @@ def test_a_range_image_keeps_the_nearest_return_per_direction():
   assert free_space.conflicts(image, probe) == (1, 3)
 
 
+def _wall_seen_from(x: float, n: int = 400) -> np.ndarray:
+  """A wall in the plane x = 0 (y, z within 4 m), in the frame of a sensor at x = -x."""
+  rng = np.random.default_rng(0)
+  return np.c_[np.full(n, x), rng.uniform(-4, 4, n), rng.uniform(-2, 2, n)]
+
+
+def test_a_surface_both_sensors_see_from_opposite_sides_is_seen_from_behind():
+  """One wall, scanned by two sensors 5 m from it: both on one side, none of it is seen
+  from behind; laid on each other with the sensors on the two sides (the second turned to
+  face the wall from its back), all of it is; too few points to judge, 0."""
+  wall1, wall2 = _wall_seen_from(5.0), _wall_seen_from(5.0)
+  surface = lambda p: prepared.PreparedCloud(p).target
+  measure = lambda t, a=wall1, b=wall2: free_space.seen_from_behind(
+      surface(a), surface(b), a, b, t, 0.3)
+  assert measure(np.eye(4)) == 0.0
+  back = geometry.make_transform(geometry.rotation_z(np.pi), np.array([10.0, 0.0, 0.0]))
+  assert measure(back) == 1.0
+  few = _wall_seen_from(5.0, free_space.MIN_FACING_POINTS - 1)
+  assert measure(back, few, few) == 0.0
+
+
 def test_each_reason_of_the_verdict():
   ok = verdict.judge(0.6, 0.02)
   assert ok.registered and ok.reason == '' and ok.line() == 'registered'
   cases = {'degenerate': dict(fitness=0.9, conflict=0.0, free='translation along x'),
            'free-space conflict': dict(fitness=0.9, conflict=0.3),
+           'seen from behind': dict(fitness=0.3, conflict=0.0, behind=0.8),
            'low overlap': dict(fitness=0.1, conflict=0.0),
            'ambiguous candidates': dict(fitness=0.4, conflict=0.0, runner_up=0.38),
            'unsupported': dict(fitness=0.2, conflict=0.0, support=1)}
@@ -86,10 +108,13 @@ def test_each_reason_of_the_verdict():
   # One RANSAC sample's matches support a pose; so does a fit the geometry alone vouches for.
   assert verdict.judge(0.2, 0.0, support=verdict.MIN_SUPPORT).registered
   assert verdict.judge(verdict.SUPPORTED_FITNESS, 0.0, support=0).registered
+  # A pose that fits as well as a re-scan's right ones is not refused for its sides.
+  assert verdict.judge(verification.CONFIDENT_FITNESS, 0.0, behind=0.99).registered
+  assert verdict.judge(0.3, 0.0, behind=verdict.MAX_BEHIND).registered
   assert set(verdict.REASONS) == set(cases)
   assert verdict.judge(0.6, 0.02).to_json() == {
       'registered': True, 'reason': '', 'fitness': 0.6, 'free_space_conflict': 0.02,
-      'runner_up_fitness': None, 'support': None}
+      'runner_up_fitness': None, 'support': None, 'seen_from_behind': None}
 
 
 @pytest.mark.real_data
@@ -97,7 +122,7 @@ def test_the_verdict_on_a_right_and_a_wrong_pose_of_real_scans():
   cloud1, cloud2, t12 = _drive_pair(0, 7)
   pair = prepared.PreparedPair(cloud1, cloud2)
   right = verdict.assess(pair, t12)
-  assert right.registered, right
+  assert right.registered and right.behind < 0.05, right
   wrong = t12.copy()
   wrong[:3, 3] += [6.0, 0.0, 0.0]
   judged = verdict.assess(pair, wrong)

@@ -14,6 +14,15 @@ return never calls a point in between a conflict). A point of the other scan in 
 cell conflicts when the cell's nearest return lies more than `margin(range)` beyond it.
 `conflict` is the larger share of the two directions; only for scans in their sensors'
 frames (`sensor_centred`).
+
+A surface is seen from one side: a laser's return lies on the face turned to its sensor.
+Under a right pose the two sensors see a shared wall from the same side; a wrong pose
+that lays a scan's wall on the other scan's wall seen from its back (the two sensors on
+opposite sides of it, e.g. a place revisited from the other heading, laid on a wall of
+the street across) has every return of it facing away from one sensor. `seen_from_behind`
+is the share of the structure points lying on the other scan's surface (within the fit
+distance) whose surface the two sensors face from opposite sides: free space cannot see
+this wrong pose, as the wall's back lies beyond what the other scan saw.
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ from typing import Callable
 import numpy as np
 
 from ssd_jax.data import preprocess
+from ssd_jax.registration import icp
 
 AZIMUTH_STEP_DEG = 1.0
 ELEVATION_STEP_DEG = 1.0
@@ -56,6 +66,12 @@ MAX_MEDIAN_RANGE = 200.0
 # puts 18-29 % of the structure in the other scan's empty space, where the right pose puts
 # 3-8 %.
 CONFLICT_WEIGHT = 2.0
+# A point is judged for the side it is seen from where both sensors face its surface at
+# an angle: |cos| between the surface normal and the direction to each sensor over this
+# (a surface seen edge-on, the ground from far away, has no side to tell).
+MIN_FACING_COS = 0.2
+# Fewer judged points than this in a direction: no side is told (0).
+MIN_FACING_POINTS = 50
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,4 +152,35 @@ def conflict(image1: RangeImage, image2: RangeImage, points1: np.ndarray, points
     pts = np.asarray(pts, np.float64)[::preprocess.even_stride(len(pts), TEST_POINTS)]
     bad, judged = conflicts(image, pts @ pose[:3, :3].T + pose[:3, 3])
     shares.append(bad / judged if judged else 0.0)
+  return float(max(shares))
+
+
+def seen_from_behind(target1: icp.Surface, target2: icp.Surface, points1: np.ndarray,
+                     points2: np.ndarray, transform: np.ndarray, distance: float) -> float:
+  """The larger share, over both directions, of one scan's points [M, 3] (its structure,
+  in its sensor's frame) lying within `distance` metres of the other scan's surface
+  (target1, target2: each scan's `icp.Surface`) whose surface the two sensors (each at
+  its frame's origin, placed by T_12 [4, 4]) face from opposite sides; judged where both
+  face it at |cos| > MIN_FACING_COS; 0 where fewer than MIN_FACING_POINTS are judged."""
+  t = np.asarray(transform, np.float64)
+  inverse = np.linalg.inv(t)
+  shares = []
+  for target, pts, pose in ((target1, points2, t), (target2, points1, inverse)):
+    pts = np.asarray(pts, np.float64)[::preprocess.even_stride(len(pts), TEST_POINTS)]
+    moved = pts @ pose[:3, :3].T + pose[:3, 3]
+    dist, idx = target.tree.query(moved, distance_upper_bound=distance)
+    found = np.isfinite(dist)
+    if not found.any():
+      shares.append(0.0)
+      continue
+    q = target.points[idx[found]]
+    n = target.normals_at(idx[found])
+    cos = []
+    for sensor in (np.zeros(3), pose[:3, 3]):   # the target's sensor, the moved scan's
+      ray = sensor - q
+      cos.append(np.einsum('ij,ij->i', n, ray) / np.maximum(np.linalg.norm(ray, axis=1), 1e-9))
+    judged = (np.abs(cos[0]) > MIN_FACING_COS) & (np.abs(cos[1]) > MIN_FACING_COS)
+    behind = judged & (cos[0] * cos[1] < 0)
+    count = int(judged.sum())
+    shares.append(behind.sum() / count if count >= MIN_FACING_POINTS else 0.0)
   return float(max(shares))

@@ -22,7 +22,8 @@ from ssd_jax.registration import options as options_lib
 CSV_HEADER = [
     'cloud1', 'cloud2', 'keypoints1', 'keypoints2', 'inliers', 'trials', 'seconds',
     *[f'T_12[{i}][{j}]' for i in range(4) for j in range(4)], 'rte', 'rre', 'success',
-    'error', 'notes', 'registered', 'verdict', 'structure_fitness', 'free_space_conflict', 'degenerate',
+    'error', 'notes', 'registered', 'verdict', 'structure_fitness', 'free_space_conflict',
+    'seen_from_behind', 'degenerate',
     'translation_constraint',
     *[f'least_fixed_translation[{i}]' for i in range(3)], 'smallest_eigenvalue',
     *[f'smallest_direction[{i}]' for i in range(6)],
@@ -50,7 +51,8 @@ def csv_row(result: pipeline.PairResult, truth: np.ndarray | None = None) -> lis
   stages = reg.seconds if reg is not None else {}
   v = reg.verdict if reg is not None and not error else None
   verdict = ([int(v.registered), v.reason, f'{v.fitness:.4f}',
-              '' if v.conflict is None else f'{v.conflict:.4f}'] if v is not None else [''] * 4)
+              *['' if x is None else f'{x:.4f}' for x in (v.conflict, v.behind)]]
+             if v is not None else [''] * 5)
   return [result.target, result.source, *keypoints,
           int(reg.inliers.sum()) if reg is not None else 0, reg.trials if reg is not None else 0,
           f'{result.seconds:.3f}', *t.ravel().tolist(), gt.get('rte', ''), gt.get('rre', ''),

@@ -78,13 +78,26 @@ class PreparedPair:
   def conflict(self, transform: np.ndarray) -> float | None:
     """`free_space.conflict` of the clouds' structure under T_12, kept per pose; None
     where either cloud is no scan in its sensor's frame."""
-    images = self.cloud1.range_image, self.cloud2.range_image
-    if images[0] is None or images[1] is None:
+    return self._seen('conflict', transform, lambda: free_space.conflict(
+        self.cloud1.range_image, self.cloud2.range_image, self.cloud1.source.scored,
+        self.cloud2.source.scored, transform))
+
+  def behind(self, transform: np.ndarray) -> float | None:
+    """`free_space.seen_from_behind` of the clouds' structure under T_12 (within
+    `verification.FIT_DISTANCE`), kept per pose; None where either cloud is no scan in
+    its sensor's frame."""
+    return self._seen('behind', transform, lambda: free_space.seen_from_behind(
+        self.cloud1.target, self.cloud2.target, self.cloud1.source.scored,
+        self.cloud2.source.scored, transform, verification.FIT_DISTANCE))
+
+  def _seen(self, name: str, transform: np.ndarray, measure) -> float | None:
+    """What the two sensors' viewpoints tell of T_12 (`measure()`), kept per pose; None
+    where either cloud is no scan in its sensor's frame (its origin no viewpoint)."""
+    if self.cloud1.range_image is None or self.cloud2.range_image is None:
       return None
-    key = ('conflict', np.asarray(transform, np.float64).tobytes())
+    key = (name, np.asarray(transform, np.float64).tobytes())
     if key not in self.memo:
-      self.memo[key] = free_space.conflict(*images, self.cloud1.source.scored,
-                                           self.cloud2.source.scored, transform)
+      self.memo[key] = measure()
     return self.memo[key]
 
   def bev_poses(self, k: int, banded: bool = False) -> np.ndarray:

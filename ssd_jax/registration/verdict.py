@@ -9,6 +9,9 @@ refuses the final pose:
     for a pose found after the first was refused, `free_under(RETRY_MIN_CONSTRAINT)`);
   * 'free-space conflict': more than MAX_CONFLICT of one scan's structure lies where the
     other scan's laser passed through (`free_space.conflict`);
+  * 'seen from behind': more than MAX_BEHIND of the structure lying on the other scan
+    lies on surfaces the two sensors face from opposite sides (`free_space.seen_from_behind`),
+    where the pose fits under `verification.CONFIDENT_FITNESS`;
   * 'low overlap': under MIN_FITNESS of cloud 2's structure lies within
     `verification.FIT_DISTANCE` of cloud 1;
   * 'ambiguous candidates': a distinct pose (`ransac.CANDIDATE_SEPARATION` away) that also
@@ -50,15 +53,22 @@ SUPPORTED_FITNESS = 0.35
 # (four) and 0.035-0.051 (four), their right ones 0.057 or more. A first try's right pose
 # may hold less (0.02: a front-view unit on a road), so the bound is the retries' alone.
 RETRY_MIN_CONSTRAINT = 4 * uncertainty.MIN_CONSTRAINT
-REASONS = ('degenerate', 'free-space conflict', 'low overlap', 'ambiguous candidates',
-           'unsupported')
+# On the development drives a wrong pose seen from behind lays 0.04-0.29 of cloud 2's
+# structure on cloud 1; right poses are seen from behind up to 0.03 on drives, but a
+# re-scan from a virtual standpoint inside what the scan saw (its walls seen from the
+# back) is, up to 0.995, and those fit 0.74-1.0: so the rule holds only for poses that fit
+# under CONFIDENT_FITNESS.
+MAX_BEHIND = 0.5
+REASONS = ('degenerate', 'free-space conflict', 'seen from behind', 'low overlap',
+           'ambiguous candidates', 'unsupported')
 
 
 @dataclasses.dataclass(frozen=True)
 class Verdict:
   """The verdict on one pose. fitness: share of cloud 2's structure within FIT_DISTANCE of
-  cloud 1; conflict: `free_space.conflict` (None where not judged); runner_up: the
-  fitness of the best distinct candidate that passes the free-space check, where one fits
+  cloud 1; conflict: `free_space.conflict` and behind: `free_space.seen_from_behind` (None
+  where not judged); runner_up: the
+  fitness of the best distinct candidate that passes the free-space checks, where one fits
   within AMBIGUOUS_MARGIN of the chosen pose (else None); support: the descriptor matches
   the pose explains (None where not counted)."""
   registered: bool
@@ -67,6 +77,7 @@ class Verdict:
   conflict: float | None = None
   runner_up: float | None = None
   support: int | None = None
+  behind: float | None = None
 
   @property
   def kind(self) -> str:
@@ -76,19 +87,24 @@ class Verdict:
   def to_json(self) -> dict:
     return {'registered': self.registered, 'reason': self.reason, 'fitness': self.fitness,
             'free_space_conflict': self.conflict, 'runner_up_fitness': self.runner_up,
-            'support': self.support}
+            'support': self.support, 'seen_from_behind': self.behind}
 
   def line(self) -> str:
     """'registered' or 'NOT registered (reason)', for the one-line summaries."""
     return 'registered' if self.registered else f'NOT registered ({self.reason})'
 
 
+def _seen_from_behind(fitness: float, behind: float | None) -> bool:
+  return behind is not None and behind > MAX_BEHIND and fitness < verification.CONFIDENT_FITNESS
+
+
 def judge(fitness: float, conflict: float | None, free: str = '',
-          runner_up: float | None = None, support: int | None = None) -> Verdict:
-  """The `Verdict` on a pose from what was measured at it: fitness, conflict (None where
-  free space was not judged), free (the uncertainty's line, '' where the scans fix the
-  pose), runner_up (the fitness of the best distinct candidate that passes the
-  free-space check, None where there is none) and support (the descriptor matches the
+          runner_up: float | None = None, support: int | None = None,
+          behind: float | None = None) -> Verdict:
+  """The `Verdict` on a pose from what was measured at it: fitness, conflict and behind
+  (None where free space was not judged), free (the uncertainty's line, '' where the scans
+  fix the pose), runner_up (the fitness of the best distinct candidate that passes the
+  free-space checks, None where there is none) and support (the descriptor matches the
   pose explains, None where not counted)."""
   reason = ''
   if free:
@@ -96,6 +112,10 @@ def judge(fitness: float, conflict: float | None, free: str = '',
   elif conflict is not None and conflict > MAX_CONFLICT:
     reason = (f"free-space conflict: {conflict:.0%} of a scan's structure lies where the "
               f"other's rays passed (over {MAX_CONFLICT:.0%})")
+  elif _seen_from_behind(fitness, behind):
+    reason = (f"seen from behind: {behind:.0%} of the structure on the other scan lies on "
+              f'surfaces the two sensors face from opposite sides (over {MAX_BEHIND:.0%}), '
+              f'and it fits {fitness:.2f}')
   elif fitness < MIN_FITNESS:
     reason = (f"low overlap: {fitness:.0%} of cloud 2's structure lies on cloud 1 (under "
               f'{MIN_FITNESS:.0%})')
@@ -105,7 +125,7 @@ def judge(fitness: float, conflict: float | None, free: str = '',
   elif support is not None and support < MIN_SUPPORT and fitness < SUPPORTED_FITNESS:
     reason = (f'unsupported: {support} of the descriptor matches agree with the pose, which '
               f"lays {fitness:.0%} of cloud 2's structure on cloud 1")
-  return Verdict(not reason, reason, float(fitness), conflict, runner_up, support)
+  return Verdict(not reason, reason, float(fitness), conflict, runner_up, support, behind)
 
 
 def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
@@ -115,9 +135,10 @@ def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
   """The `Verdict` on T_12 [4, 4] of the clouds of `pair` (in their own frames); free and
   support as for `judge`; candidates [k, 4, 4] with their fitness [k]: the verification's poses
   (`verification.verify`), of which only those distinct from T_12 that fit within
-  AMBIGUOUS_MARGIN of it are checked for free space; judge_free_space False: the clouds'
-  origins are not their sensors' (no free-space check)."""
+  AMBIGUOUS_MARGIN of it are checked for free space and sides; judge_free_space False: the
+  clouds' origins are not their sensors' (no free-space checks)."""
   conflict = pair.conflict if judge_free_space else lambda t: None
+  behind = pair.behind if judge_free_space else lambda t: None
   fitness = verification.fitness(pair.cloud1.target, pair.cloud2.source.scored, transform)
   runner_up = None
   if candidates is not None:
@@ -127,7 +148,8 @@ def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
       if candidate_fitness[c] < fitness - AMBIGUOUS_MARGIN:
         break
       other = conflict(candidates[c])
-      if other is None or other <= MAX_CONFLICT:
+      if ((other is None or other <= MAX_CONFLICT)
+          and not _seen_from_behind(candidate_fitness[c], behind(candidates[c]))):
         runner_up = float(candidate_fitness[c])
         break
-  return judge(fitness, conflict(transform), free, runner_up, support)
+  return judge(fitness, conflict(transform), free, runner_up, support, behind(transform))
