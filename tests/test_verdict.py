@@ -52,6 +52,19 @@ def test_only_scans_in_their_sensors_frames_are_judged():
   ground = np.stack(np.meshgrid(np.arange(-5, 5, 0.1), np.arange(-5, 5, 0.1)), -1).reshape(-1, 2)
   tile = np.concatenate([cloud1, np.c_[ground, np.full(len(ground), -1.8)]])
   assert not free_space.sensor_centred(tile)
+  # A forward-looking unit pitched down sees the ground just ahead of it, in its view: as
+  # many points near its axis as the tile has, on one side.
+  near_tile = int(np.sum(np.linalg.norm(tile[:, :2], axis=1) < free_space.BLIND_RADIUS))
+  rng = np.random.default_rng(0)
+  x = rng.uniform(0.2, 1.0, near_tile)
+  ahead = np.c_[x, x * rng.uniform(-0.6, 0.6, near_tile), np.full(near_tile, -1.2)]
+  assert free_space.sensor_centred(np.concatenate([cloud1, ahead]))
+  # A real one: a hand-held Livox Avia scan pitched down, 8 % of its points within 1 m of
+  # its axis.
+  livox = clean.clean_cloud(io.read_cloud(
+      shared_path('real_drives', 'livox_quick_shack', 'scans', '000010.bin')), '', np.float64)
+  assert np.mean(np.linalg.norm(livox[:, :2], axis=1) < 1.0) > 0.05
+  assert free_space.sensor_centred(livox)
   assert prepared.PreparedPair(tile, cloud1).conflict(np.eye(4)) is None
 
 

@@ -52,10 +52,15 @@ MIN_RANGE = 1.0
 MIN_JUDGED_RANGE = 3.0
 # A scan in its sensor's frame has next to no points within BLIND_RADIUS metres of the
 # sensor's vertical axis (the vehicle, the sensor's own blind zone): at most
-# MAX_BLIND_SHARE of them. A map tile, a submap or a cloud centred on its points has its
-# ground there, and its origin is no viewpoint to judge free space from.
+# MAX_BLIND_SHARE of them, or, where a forward-looking unit is pitched down (a hand-held
+# solid-state unit: 1-8 % of its points), ONE_SIDED_SHARE of them within
+# ONE_SIDED_SPREAD_DEG of their mean azimuth: the ground ahead of it, in its view. A map
+# tile, a submap or a cloud centred on its points has its ground all round there, and its
+# origin is no viewpoint to judge free space from.
 BLIND_RADIUS = 1.0
 MAX_BLIND_SHARE = 0.005
+ONE_SIDED_SPREAD_DEG = 60.0
+ONE_SIDED_SHARE = 0.95
 # Metres: a scan's median horizontal range is under this (a cloud in map coordinates, its
 # origin kilometres away, has no points near the origin either).
 MAX_MEDIAN_RANGE = 200.0
@@ -122,9 +127,18 @@ def conflicts(image: RangeImage, points: np.ndarray) -> tuple[int, int]:
 
 def sensor_centred(points: np.ndarray) -> bool:
   """Whether a cloud [N, 3] metres looks like a scan in its sensor's frame (above)."""
-  horizontal = np.linalg.norm(np.asarray(points)[:, :2], axis=1)
-  return bool(len(points) and np.mean(horizontal < BLIND_RADIUS) <= MAX_BLIND_SHARE
-              and np.median(horizontal) < MAX_MEDIAN_RANGE)
+  points = np.asarray(points)
+  if not len(points):
+    return False
+  horizontal = np.linalg.norm(points[:, :2], axis=1)
+  near = points[horizontal < BLIND_RADIUS]
+  if len(near) > MAX_BLIND_SHARE * len(points):
+    azimuth = np.arctan2(near[:, 1], near[:, 0])
+    mean = np.arctan2(np.sin(azimuth).mean(), np.cos(azimuth).mean())
+    off = np.abs(np.angle(np.exp(1j * (azimuth - mean))))
+    if np.mean(off <= np.radians(ONE_SIDED_SPREAD_DEG)) < ONE_SIDED_SHARE:
+      return False
+  return bool(np.median(horizontal) < MAX_MEDIAN_RANGE)
 
 
 def ranked(fitness, conflict: Callable[[int], float | None]) -> np.ndarray:
