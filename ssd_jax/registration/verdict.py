@@ -67,10 +67,9 @@ REASONS = ('degenerate', 'free-space conflict', 'seen from behind', 'low overlap
 class Verdict:
   """The verdict on one pose. fitness: share of cloud 2's structure within FIT_DISTANCE of
   cloud 1; conflict: `free_space.conflict` and behind: `free_space.seen_from_behind` (None
-  where not judged); runner_up: the
-  fitness of the best distinct candidate that passes the free-space checks, where one fits
-  within AMBIGUOUS_MARGIN of the chosen pose (else None); support: the descriptor matches
-  the pose explains (None where not counted)."""
+  where not judged); runner_up: the fitness of the best distinct candidate that passes the
+  free-space checks, where one fits within AMBIGUOUS_MARGIN of the chosen pose (else None);
+  support: the descriptor matches the pose explains (None where not counted)."""
   registered: bool
   reason: str            # '' where registered, else REASONS[k] + ': ' + what was measured
   fitness: float
