@@ -154,17 +154,24 @@ def ranked(fitness, conflict: Callable[[int], float | None]) -> np.ndarray:
   return np.argsort(-scores, kind='stable')
 
 
+def _both_ways(of1, of2, points1: np.ndarray, points2: np.ndarray, transform: np.ndarray):
+  """Both directions of a pair under T_12: (what is judged against, scan 1's `of1` then
+  scan 2's `of2`; the other scan's points [M, 3], an even stride of TEST_POINTS, moved
+  into its frame; the moved scan's pose in that frame [4, 4])."""
+  t = np.asarray(transform, np.float64)
+  for judge, pts, pose in ((of1, points2, t), (of2, points1, np.linalg.inv(t))):
+    pts = np.asarray(pts, np.float64)[::preprocess.even_stride(len(pts), TEST_POINTS)]
+    yield judge, pts @ pose[:3, :3].T + pose[:3, 3], pose
+
+
 def conflict(image1: RangeImage, image2: RangeImage, points1: np.ndarray, points2: np.ndarray,
              transform: np.ndarray) -> float:
   """The larger share, over both directions, of one scan's points [M, 3] (its structure,
   in its sensor's frame) that lie in the other's empty space under T_12 (maps scan 2
   into scan 1's frame); 0 where neither scan could judge any."""
-  t = np.asarray(transform, np.float64)
-  inverse = np.linalg.inv(t)
   shares = []
-  for image, pts, pose in ((image1, points2, t), (image2, points1, inverse)):
-    pts = np.asarray(pts, np.float64)[::preprocess.even_stride(len(pts), TEST_POINTS)]
-    bad, judged = conflicts(image, pts @ pose[:3, :3].T + pose[:3, 3])
+  for image, moved, _ in _both_ways(image1, image2, points1, points2, transform):
+    bad, judged = conflicts(image, moved)
     shares.append(bad / judged if judged else 0.0)
   return float(max(shares))
 
@@ -176,25 +183,16 @@ def seen_from_behind(target1: icp.Surface, target2: icp.Surface, points1: np.nda
   (target1, target2: each scan's `icp.Surface`) whose surface the two sensors (each at
   its frame's origin, placed by T_12 [4, 4]) face from opposite sides; judged where both
   face it at |cos| > MIN_FACING_COS; 0 where fewer than MIN_FACING_POINTS are judged."""
-  t = np.asarray(transform, np.float64)
-  inverse = np.linalg.inv(t)
-  shares = []
-  for target, pts, pose in ((target1, points2, t), (target2, points1, inverse)):
-    pts = np.asarray(pts, np.float64)[::preprocess.even_stride(len(pts), TEST_POINTS)]
-    moved = pts @ pose[:3, :3].T + pose[:3, 3]
+  shares = [0.0]
+  for target, moved, pose in _both_ways(target1, target2, points1, points2, transform):
     dist, idx = target.tree.query(moved, distance_upper_bound=distance)
-    found = np.isfinite(dist)
-    if not found.any():
-      shares.append(0.0)
-      continue
-    q = target.points[idx[found]]
-    n = target.normals_at(idx[found])
+    idx = idx[np.isfinite(dist)]
+    q, n = target.points[idx], target.normals_at(idx)
     cos = []
     for sensor in (np.zeros(3), pose[:3, 3]):   # the target's sensor, the moved scan's
       ray = sensor - q
       cos.append(np.einsum('ij,ij->i', n, ray) / np.maximum(np.linalg.norm(ray, axis=1), 1e-9))
     judged = (np.abs(cos[0]) > MIN_FACING_COS) & (np.abs(cos[1]) > MIN_FACING_COS)
-    behind = judged & (cos[0] * cos[1] < 0)
-    count = int(judged.sum())
-    shares.append(behind.sum() / count if count >= MIN_FACING_POINTS else 0.0)
-  return float(max(shares))
+    if judged.sum() >= MIN_FACING_POINTS:
+      shares.append(float(np.mean(cos[0][judged] * cos[1][judged] < 0)))
+  return max(shares)
