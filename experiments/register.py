@@ -62,6 +62,8 @@ flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: 
                     f'{pretrained.DEFAULT}, or ours_detector for learned keypoints).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding the pairs (optional).')
 flags.DEFINE_bool('icp', DEFAULTS.icp, 'Refine with point-to-plane ICP (1 m, then 0.5 m).')
+flags.DEFINE_bool('free_space', DEFAULTS.free_space, "Judge free space from each cloud's origin "
+                  "as its sensor; --nofree_space for scans in a world frame or in the other's.")
 flags.DEFINE_integer('seed', DEFAULTS.seed, 'RANSAC / random-keypoint seed.')
 flags.DEFINE_integer('draws', None, 'Learned descriptors: samplings of each ball (0: the '
                      "model's own; default one of 32 points where poses are verified).")
@@ -82,7 +84,8 @@ def _options(descriptor: str) -> options_lib.Options:
                            "about z only, and are checked with RANSAC's)")
   return options_lib.Options(FLAGS.keypoints, descriptor, FLAGS.ransac, FLAGS.verify, FLAGS.bev,
                              FLAGS.icp, FLAGS.draws, FLAGS.voxel, FLAGS.fpfh_max_nn, FLAGS.seed,
-                             FLAGS.level, FLAGS.sampling, ','.join(FLAGS.retry))
+                             FLAGS.level, FLAGS.sampling, ','.join(FLAGS.retry),
+                             free_space=FLAGS.free_space)
 
 
 def _read(path: str) -> np.ndarray:

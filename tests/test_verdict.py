@@ -165,6 +165,27 @@ def test_register_returns_the_verdict_with_the_pose():
 
 
 @pytest.mark.real_data
+def test_scans_in_one_frame_are_registered_without_free_space():
+  """Scan 2 given in scan 1's frame (its sensor 7.8 m from the origin, as odometry or a
+  map puts it) still looks like a scan in its sensor's frame; judged from the origin, the
+  right pose (now the identity) puts several times more structure in the other scan's
+  'free space' than the same pose between the sensors' frames. `free_space=False` judges
+  neither free space nor sides: the right pose is trusted."""
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  moved = np.asarray(geometry.apply_transform(t12, cloud2))
+  assert free_space.sensor_centred(moved)
+  own_frames = prepared.PreparedPair(cloud1, cloud2).conflict(t12)
+  assert prepared.PreparedPair(cloud1, moved).conflict(np.eye(4)) > 3 * own_frames
+  no_viewpoint = prepared.PreparedCloud(moved, viewpoint=False)
+  assert prepared.PreparedPair(cloud1, no_viewpoint).conflict(np.eye(4)) is None
+  reg, _, _ = pipeline.register(target=cloud1, source=moved,
+                                options=options_lib.Options(descriptor='fpfh', free_space=False))
+  assert metrics.registration_errors(np.eye(4), reg.transform)['success']
+  assert reg.verdict.registered, reg.verdict
+  assert reg.verdict.conflict is None and reg.verdict.behind is None
+
+
+@pytest.mark.real_data
 def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
   """A learned descriptor that fails on a pair (here noise at any sampling: its candidates
   hold no right pose, and the BEV search is off) leaves a pose the verdict refuses; the

@@ -64,6 +64,11 @@ class Options:
   bev_banded  the banded BEV search's best poses, ranked as the verification picks, join
               the BEV search's (`prepared.PreparedPair.bev_poses`): the 'bev' retry's.
   icp         point-to-plane ICP from the chosen pose (1 m, then 0.5 m).
+  free_space  each cloud's origin is its sensor, where the cloud looks like a scan in its
+              sensor's frame (`free_space.sensor_centred`): the verification and the
+              verdict judge free space and the sides surfaces are seen from. False for
+              scans not in their sensors' frames that still look so (a world frame, or
+              the other scan's frame near it): their origins are no viewpoints.
   draws       samplings of each ball the learned descriptor averages: None,
               VERIFIED_DRAWS of VERIFIED_SAMPLES points where verify > 0, else the
               model's own; 0 the model's own (`describing`).
@@ -101,6 +106,7 @@ class Options:
   sampling: str = 'auto'
   retry: tuple[str, ...] = RETRIES
   bev_banded: bool = False
+  free_space: bool = True
 
   def __post_init__(self):
     if isinstance(self.retry, str):

@@ -175,7 +175,8 @@ class Registrar:
     t2 = time.perf_counter()
     if note:
       self._say(f'voxel: {name}: {note}')
-    own = prepared.PreparedCloud(points)
+    viewpoint = self._options.free_space
+    own = prepared.PreparedCloud(points, viewpoint)
     level, note = leveling.level_for(points, self._options.level, name,
                                      sensor_at_origin=not offset.any())
     if note:
@@ -189,7 +190,7 @@ class Registrar:
       self._say(f'{name}: {f.note}')
     self._stage(f'{name}: descriptors')
     f.levels[0]()   # the first level's, which every pair needs
-    self._kept[path] = _Cloud(prepared.PreparedCloud(points) if level.turned else own,
+    self._kept[path] = _Cloud(prepared.PreparedCloud(points, viewpoint) if level.turned else own,
                               {self._options.descriptor: f},
                               {'read': t1 - t0, 'grid': t2 - t1, 'level': t3 - t2,
                                **f.seconds}, level, own, offset)

@@ -22,10 +22,12 @@ from ssd_jax.registration import bev, free_space, icp, verification
 class PreparedCloud:
   """points [N, 3] metres (float64, z up), with `footprint` (`bev.footprint`), `target`
   (`verification.target`: as cloud 1), `source` (`verification.source`: as cloud 2) and
-  `range_image` (`free_space`) made on first use."""
+  `range_image` (`free_space`) made on first use. viewpoint False: the origin is not the
+  cloud's sensor, whatever the cloud looks like (no range image)."""
 
-  def __init__(self, points: np.ndarray):
+  def __init__(self, points: np.ndarray, viewpoint: bool = True):
     self.points = np.asarray(points, np.float64)
+    self.viewpoint = viewpoint
 
   def __len__(self) -> int:
     return len(self.points)
@@ -45,8 +47,8 @@ class PreparedCloud:
   @functools.cached_property
   def range_image(self) -> free_space.RangeImage | None:
     """Its nearest return per direction (`free_space.range_image`), None where it is no
-    scan in its sensor's frame (`free_space.sensor_centred`)."""
-    if not free_space.sensor_centred(self.points):
+    scan in its sensor's frame (`viewpoint` False, or `free_space.sensor_centred`)."""
+    if not (self.viewpoint and free_space.sensor_centred(self.points)):
       return None
     return free_space.range_image(self.points)
 
