@@ -141,7 +141,8 @@ def test_the_verdict_on_a_right_and_a_wrong_pose_of_real_scans():
   judged = verdict.assess(pair, wrong)
   assert not judged.registered and judged.kind in ('free-space conflict', 'low overlap'), judged
   # Without the free-space check (clouds off their sensors' frames) the other reasons hold.
-  assert verdict.assess(pair, t12, judge_free_space=False).conflict is None
+  no_viewpoint = prepared.PreparedPair(prepared.PreparedCloud(cloud1, viewpoint=False), cloud2)
+  assert verdict.assess(no_viewpoint, t12).conflict is None
   # The right pose as a distinct candidate fitting as well: ambiguous.
   twin = t12.copy()
   twin[:3, 3] += [0.0, 0.0, 3.0]   # 3 m off: a distinct candidate

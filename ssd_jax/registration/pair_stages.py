@@ -207,11 +207,12 @@ def coarse_to_fine(levels1: Sequence[Callable[[], Features]],
 def assess(reg: Registration, points1, points2=None, origin: np.ndarray | None = None,
            min_constraint: float = uncertainty_lib.MIN_CONSTRAINT) -> Registration:
   """`reg` with its `uncertainty` at its transform (`uncertainty.assess`) and its
-  `verdict` (`verdict.assess`): points1, points2 as for `verify`; `origin` [3]: cloud 1's
-  frame origin in their coordinates (default 0; free space is judged only where it is 0,
-  the clouds in their sensors' frames); `min_constraint`: what every shift must be held
-  by, per correspondence, not to be called degenerate (`verdict.RETRY_MIN_CONSTRAINT` for
-  a retry's pose). Uses the verification's candidates where `reg` was verified."""
+  `verdict` (`verdict.assess`): points1, points2 as for `verify` (free space is judged
+  where both are scans from their origins, `prepared.PreparedCloud.range_image`);
+  `origin` [3]: cloud 1's frame origin in their coordinates (default 0); `min_constraint`:
+  what every shift must be held by, per correspondence, not to be called degenerate
+  (`verdict.RETRY_MIN_CONSTRAINT` for a retry's pose). Uses the verification's candidates
+  where `reg` was verified."""
   t0 = time.perf_counter()
   pair = prepared.prepare_pair(points1, points2)
   cloud1, cloud2 = pair.cloud1, pair.cloud2
@@ -219,7 +220,6 @@ def assess(reg: Registration, points1, points2=None, origin: np.ndarray | None =
                                     origin)
   judged = verdict_lib.assess(pair, reg.transform, assessed.free_under(min_constraint),
                               reg.verified_poses, reg.verified_fitness,
-                              judge_free_space=origin is None or not np.any(origin),
                               support=int(reg.inliers.sum()))
   return dataclasses.replace(reg, uncertainty=assessed, verdict=judged,
                              seconds={**reg.seconds, 'assess': time.perf_counter() - t0})

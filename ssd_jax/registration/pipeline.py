@@ -175,10 +175,12 @@ class Registrar:
     t2 = time.perf_counter()
     if note:
       self._say(f'voxel: {name}: {note}')
-    viewpoint = self._options.free_space
-    own = prepared.PreparedCloud(points, viewpoint)
+    # Its origin is its sensor's unless moved to its centroid (`local_origin`); free space
+    # is judged from it unless the options say the clouds are not in their sensors' frames.
+    at_origin = not offset.any()
+    own = prepared.PreparedCloud(points, at_origin and self._options.free_space)
     level, note = leveling.level_for(points, self._options.level, name,
-                                     sensor_at_origin=not offset.any())
+                                     sensor_at_origin=at_origin)
     if note:
       self._say(note)
     points = level.apply(points)
@@ -190,7 +192,8 @@ class Registrar:
       self._say(f'{name}: {f.note}')
     self._stage(f'{name}: descriptors')
     f.levels[0]()   # the first level's, which every pair needs
-    self._kept[path] = _Cloud(prepared.PreparedCloud(points, viewpoint) if level.turned else own,
+    turned = prepared.PreparedCloud(points, own.viewpoint) if level.turned else own
+    self._kept[path] = _Cloud(turned,
                               {self._options.descriptor: f},
                               {'read': t1 - t0, 'grid': t2 - t1, 'level': t3 - t2,
                                **f.seconds}, level, own, offset)

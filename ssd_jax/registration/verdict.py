@@ -129,15 +129,13 @@ def judge(fitness: float, conflict: float | None, free: str = '',
 
 def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
            candidates: np.ndarray | None = None,
-           candidate_fitness: np.ndarray | None = None, judge_free_space: bool = True,
+           candidate_fitness: np.ndarray | None = None,
            support: int | None = None) -> Verdict:
   """The `Verdict` on T_12 [4, 4] of the clouds of `pair` (in their own frames); free and
   support as for `judge`; candidates [k, 4, 4] with their fitness [k]: the verification's poses
   (`verification.verify`), of which only those distinct from T_12 that fit within
-  AMBIGUOUS_MARGIN of it are checked for free space and sides; judge_free_space False: the
-  clouds' origins are not their sensors' (no free-space checks)."""
-  conflict = pair.conflict if judge_free_space else lambda t: None
-  behind = pair.behind if judge_free_space else lambda t: None
+  AMBIGUOUS_MARGIN of it are checked for free space and sides (None where a cloud's origin
+  is no viewpoint: `prepared.PreparedCloud.range_image`)."""
   fitness = verification.fitness(pair.cloud1.target, pair.cloud2.source.scored, transform)
   runner_up = None
   if candidates is not None:
@@ -146,9 +144,10 @@ def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
         continue
       if candidate_fitness[c] < fitness - AMBIGUOUS_MARGIN:
         break
-      other = conflict(candidates[c])
+      other = pair.conflict(candidates[c])
       if ((other is None or other <= MAX_CONFLICT)
-          and not _seen_from_behind(candidate_fitness[c], behind(candidates[c]))):
+          and not _seen_from_behind(candidate_fitness[c], pair.behind(candidates[c]))):
         runner_up = float(candidate_fitness[c])
         break
-  return judge(fitness, conflict(transform), free, runner_up, support, behind(transform))
+  return judge(fitness, pair.conflict(transform), free, runner_up, support,
+               pair.behind(transform))
