@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from ssd_jax import geometry, inference, pretrained
-from ssd_jax.data import clean, groundtruth, io, kitti
+from ssd_jax.data import clean, groundtruth, io, kitti, preprocess
 from ssd_jax.infra import errors
-from ssd_jax.registration import bev, free_space, metrics, outputs, pipeline, prepared
+from ssd_jax.registration import bev, cloud_features, free_space, metrics, outputs, pipeline
+from ssd_jax.registration import prepared
 from ssd_jax.registration import uncertainty, verdict, verification
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
@@ -100,6 +101,21 @@ def test_a_surface_both_sensors_see_from_opposite_sides_is_seen_from_behind():
   assert measure(back) == 1.0
   few = _wall_seen_from(5.0, free_space.MIN_FACING_POINTS - 1)
   assert measure(back, few, few) == 0.0
+
+
+def test_a_cloud_sparser_than_the_verdicts_calibration_is_told_so():
+  """The verdict was calibrated on clouds whose points lie 0.1-0.3 m apart: a cloud whose
+  points lie 0.7 m apart is used as given, with a note that the verdict may refuse right
+  poses; one 0.25 m apart is used as given without it."""
+  def lattice(step):
+    axis = np.arange(12) * step
+    return np.stack(np.meshgrid(axis, axis, axis), -1).reshape(-1, 3)
+  assert preprocess.point_spacing(lattice(0.7)) == pytest.approx(0.7)
+  _, sparse = cloud_features.to_grid(lattice(0.7), 0.2)
+  assert sparse.startswith('1,728 points, no denser than the 0.2 m grid: used as given')
+  assert '0.7 m apart (median)' in sparse and 'may refuse right poses' in sparse
+  _, dense = cloud_features.to_grid(lattice(0.25), 0.2)
+  assert dense == '1,728 points, no denser than the 0.2 m grid: used as given'
 
 
 def test_each_reason_of_the_verdict():
