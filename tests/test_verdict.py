@@ -82,6 +82,26 @@ def test_a_range_image_keeps_the_nearest_return_per_direction():
   assert free_space.conflicts(image, probe) == (1, 3)
 
 
+def test_the_verification_takes_first_the_best_pose_the_verdict_would_not_refuse_for_its_sides():
+  """Candidates ranked by fitness less twice the conflict; one the verdict refuses as seen
+  from behind (over MAX_BEHIND where it fits under CONFIDENT_FITNESS) yields to the next,
+  which is asked only as far as needed; where every one is refused the order stands."""
+  fitness = np.array([0.39, 0.27, 0.30, 0.6])
+  conflict = [0.10, 0.08, 0.30, 0.0]
+  behind = [0.97, 0.01, 0.02, 0.9]
+  assert list(free_space.ranked(fitness, conflict.__getitem__)) == [3, 0, 1, 2]
+  asked = []
+  refused = lambda c: asked.append(c) or verdict.seen_from_behind(fitness[c], behind[c])
+  # 3 fits 0.6: confident, its sides not held against it.
+  assert list(free_space.ranked(fitness, conflict.__getitem__, refused)) == [3, 0, 1, 2]
+  assert asked == [3]
+  asked.clear()
+  assert list(free_space.ranked(fitness[:3], conflict.__getitem__, refused)) == [1, 0, 2]
+  assert asked == [0, 1]
+  assert list(free_space.ranked(fitness[:3], conflict.__getitem__, lambda c: True)) == [0, 1, 2]
+  assert not verdict.seen_from_behind(0.39, None)
+
+
 def _wall_seen_from(x: float, n: int = 400) -> np.ndarray:
   """A wall in the plane x = 0 (y, z within 4 m), in the frame of a sensor at x = -x."""
   rng = np.random.default_rng(0)

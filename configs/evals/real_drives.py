@@ -22,8 +22,8 @@ pair on the five drives' scans: drop it (`--config.evals.drives.rows=...`) for a
 
 Expected (2-core VM): the defaults register 94.9 % of the five drives' 214 pairs, 71.2 %
 of the Livox drive's 80 and 98.4 % of Riverside02's 128 (`--config.checkpoints.ours_mined=ours`
-for `ours`: 93.0, 66.2 and 96.9 %), and their verdict trusts 98.0, 100 and 100 % of the
-right poses and refuses 90.9, 100 and 100 % of the wrong ones; docs/notes/real_drives.md
+for `ours`: 93.0, 67.5 and 96.9 %), and their verdict trusts 98.0, 100 and 100 % of the
+right poses and refuses 90.9, 95.7 and 100 % of the wrong ones; docs/notes/real_drives.md
 has the tables and what each stage loses.
 """
 

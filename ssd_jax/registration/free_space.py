@@ -141,17 +141,25 @@ def sensor_centred(points: np.ndarray) -> bool:
   return bool(np.median(horizontal) < MAX_MEDIAN_RANGE)
 
 
-def ranked(fitness, conflict: Callable[[int], float | None]) -> np.ndarray:
+def ranked(fitness, conflict: Callable[[int], float | None],
+           refused: Callable[[int], bool] | None = None) -> np.ndarray:
   """Candidates (fitness [k]) best first, as the verification picks them: by fitness less
   CONFLICT_WEIGHT times their conflict (`conflict(c)`, None where free space cannot be
-  judged: then by fitness alone). Ties keep the earlier candidate first."""
+  judged: then by fitness alone). Ties keep the earlier candidate first. With `refused`,
+  the first in that order for which `refused(c)` is False comes first (asked from the
+  top, only as far as needed; the order stands where every candidate is refused)."""
   scores = np.asarray(fitness, np.float64).copy()
   for c in range(len(scores)):
     share = conflict(c)
     if share is None:
-      return np.argsort(-np.asarray(fitness, np.float64), kind='stable')
+      scores = np.asarray(fitness, np.float64)
+      break
     scores[c] -= CONFLICT_WEIGHT * share
-  return np.argsort(-scores, kind='stable')
+  order = np.argsort(-scores, kind='stable')
+  if refused is not None:
+    first = next((n for n, c in enumerate(order) if not refused(c)), 0)
+    order = np.concatenate([order[first:first + 1], order[:first], order[first + 1:]])
+  return order
 
 
 def _both_ways(of1, of2, points1: np.ndarray, points2: np.ndarray, transform: np.ndarray):

@@ -134,8 +134,12 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
   # With the BEV search to follow, RANSAC's candidates alone only decide whether it runs
   # (a confident pose), and the call with both refines what wins: none is refined in full
   # here unless it could be confident (`confident_only`).
-  # Among them, the one that also leaves each scan's empty space empty (`free_space.ranked`).
-  choose = lambda poses, fit: int(free_space.ranked(fit, lambda c: pair.conflict(poses[c]))[0])
+  # Among them, the one that also leaves each scan's empty space empty (`free_space.ranked`)
+  # and whose surfaces the two sensors do not face from opposite sides: the verdict refuses
+  # such a pose (`verdict.seen_from_behind`), so one it would not refuse is taken first.
+  choose = lambda poses, fit: int(free_space.ranked(
+      fit, lambda c: pair.conflict(poses[c]),
+      lambda c: verdict_lib.seen_from_behind(fit[c], pair.behind(poses[c])))[0])
   best, refined, fitness = verification.verify(target, source, candidates, memo=pair.memo,
                                                confident_only=confident_only or bev_candidates > 0,
                                                choose=choose)

@@ -93,7 +93,9 @@ class Verdict:
     return 'registered' if self.registered else f'NOT registered ({self.reason})'
 
 
-def _seen_from_behind(fitness: float, behind: float | None) -> bool:
+def seen_from_behind(fitness: float, behind: float | None) -> bool:
+  """Whether a pose fitting `fitness`, whose structure is seen from behind `behind` (None
+  where not judged), is refused for it (`MAX_BEHIND`, under `CONFIDENT_FITNESS`)."""
   return behind is not None and behind > MAX_BEHIND and fitness < verification.CONFIDENT_FITNESS
 
 
@@ -111,7 +113,7 @@ def judge(fitness: float, conflict: float | None, free: str = '',
   elif conflict is not None and conflict > MAX_CONFLICT:
     reason = (f"free-space conflict: {conflict:.0%} of a scan's structure lies where the "
               f"other's rays passed (over {MAX_CONFLICT:.0%})")
-  elif _seen_from_behind(fitness, behind):
+  elif seen_from_behind(fitness, behind):
     reason = (f"seen from behind: {behind:.0%} of the structure on the other scan lies on "
               f'surfaces the two sensors face from opposite sides (over {MAX_BEHIND:.0%}), '
               f'and it fits {fitness:.2f}')
@@ -146,7 +148,7 @@ def assess(pair: prepared.PreparedPair, transform: np.ndarray, free: str = '',
         break
       other = pair.conflict(candidates[c])
       if ((other is None or other <= MAX_CONFLICT)
-          and not _seen_from_behind(candidate_fitness[c], pair.behind(candidates[c]))):
+          and not seen_from_behind(candidate_fitness[c], pair.behind(candidates[c]))):
         runner_up = float(candidate_fitness[c])
         break
   return judge(fitness, pair.conflict(transform), free, runner_up, support,
