@@ -253,14 +253,31 @@ def test_a_refused_pose_is_registered_again_with_fpfh(monkeypatch):
   assert again.seconds['ransac'] > first.seconds['ransac']   # both tries are counted
   # A retry's pose must hold every shift by verdict.RETRY_MIN_CONSTRAINT, 4x a first try's
   # bound: asked for more than FPFH's pose holds, the retry is refused too, and the first
-  # refusal stands.
+  # refusal (the scans barely overlap there: nothing contradicts it) stands.
   held = again.uncertainty.translation_constraint[0]
   assert held >= verdict.RETRY_MIN_CONSTRAINT > uncertainty.MIN_CONSTRAINT
   monkeypatch.setattr(verdict, 'RETRY_MIN_CONSTRAINT', 1.01 * held)
   strict, _, _ = pipeline.register(target=cloud1, source=cloud2, model=model,
                                    options=options_lib.Options(bev=0, retry='fpfh'))
   assert not strict.verdict.registered and strict.verdict.reason == first.verdict.reason
+  assert first.verdict.kind not in pipeline.CONTRADICTED
   np.testing.assert_array_equal(strict.transform, first.transform)
+
+
+def test_where_every_pose_is_refused_the_first_stands_unless_the_scans_contradict_it():
+  """Every try refused: a first pose refused as ambiguous or for low overlap stands (it
+  may be right); one the scans contradict (free space, sides) yields to the retries' pose
+  that ranks first as the verification ranks them, those not contradicted first."""
+  conflicted = verdict.judge(0.31, 0.23)                    # HKU_MB 216-283's first pose
+  twin = verdict.judge(0.19, 0.02, runner_up=0.17)          # its bev retry's, right
+  behind = verdict.judge(0.39, 0.05, behind=0.97)
+  low = verdict.judge(0.12, 0.0)
+  assert conflicted.kind == 'free-space conflict' and twin.kind == 'ambiguous candidates'
+  assert pipeline.kept_of_refused([conflicted, behind, twin, low]) == 2
+  assert pipeline.kept_of_refused([twin, conflicted, low]) == 0
+  assert pipeline.kept_of_refused([low, twin]) == 0
+  assert pipeline.kept_of_refused([conflicted, behind]) == 1   # both contradicted: by score
+
 
 
 @pytest.mark.real_data

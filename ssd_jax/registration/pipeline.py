@@ -17,7 +17,8 @@ import numpy as np
 
 from ssd_jax import geometry
 from ssd_jax.data.clean import check_cloud
-from ssd_jax.registration import cloud_features, leveling, pair_stages, prepared, uncertainty
+from ssd_jax.registration import cloud_features, free_space, leveling, pair_stages, prepared
+from ssd_jax.registration import uncertainty
 from ssd_jax.registration import options as options_lib, verdict as verdict_lib, verification
 
 Features = cloud_features.CloudFeatures
@@ -39,6 +40,15 @@ RETRY_NOTES = {'structure': 'registered again with keypoints on the structure ab
                        'refused ({})',
                'bev': "registered again with the banded BEV search's poses, the first pose "
                       'refused ({})'}
+# Where every try's pose is refused, the first stands unless the scans contradict it (the
+# verdict's reasons in CONTRADICTED): then the pose the scans do not contradict that ranks
+# first as the verification ranks candidates (`kept_of_refused`) is returned, refused, with
+# this note where a retry found it. Such a first pose is often a wrong one laid where the
+# other scan saw through, a retry's a right pose refused for a low overlap or a near twin
+# (`ambiguous candidates`); a first pose refused as ambiguous may be the right one.
+CONTRADICTED = ('free-space conflict', 'seen from behind')
+REFUSED_RETRY_NOTE = ("every pose refused; this one, the {} try's, ranks first as the "
+                      'verification ranks them')
 # The features of the retries with the learned descriptors, as `_Cloud.features` keeps them.
 OWN_SAMPLING = 'learned, own sampling'
 ON_STRUCTURE = 'learned, keypoints on the structure'
@@ -48,6 +58,17 @@ def _settled(reg: pair_stages.Registration) -> bool:
   """Whether a verified registration's best pose is clear (`clearly_confident`)."""
   return reg.verified_fitness is not None and verification.clearly_confident(
       reg.verified_poses, reg.verified_fitness)
+
+
+def kept_of_refused(verdicts: list[verdict_lib.Verdict]) -> int:
+  """Which of a pair's tries to return where the verdict refused every one (`verdicts`,
+  the first try's first): the first, unless the scans contradict it (`CONTRADICTED`);
+  then the one ranking first as the verification ranks candidates (`free_space.ranked`:
+  fitness less twice the conflict), those not contradicted first."""
+  if verdicts[0].kind not in CONTRADICTED:
+    return 0
+  return int(free_space.ranked([v.fitness for v in verdicts], lambda k: verdicts[k].conflict,
+                               lambda k: verdicts[k].kind in CONTRADICTED)[0])
 
 
 def _any_rotation(options: options_lib.Options) -> options_lib.Options:
@@ -260,6 +281,7 @@ class Registrar:
       reg.notes.append(UPRIGHT_NOTE)
     elif self._retries and not reg.verdict.registered:
       spent = collections.Counter(reg.seconds)   # every try's stages, as `any_rotation`'s
+      tries = [(reg, f1, f2)]
       for name, (key, options, model) in self._retries.items():
         again, g1, g2 = self._upright(entries, pair, options, seconds, pair_name, key, model,
                                       verdict_lib.RETRY_MIN_CONSTRAINT)
@@ -268,6 +290,10 @@ class Registrar:
           again.notes.append(RETRY_NOTES[name].format(reg.verdict.reason))
           reg, f1, f2 = again, g1, g2
           break
+        again.notes.append(REFUSED_RETRY_NOTE.format(name))
+        tries.append((again, g1, g2))
+      else:
+        reg, f1, f2 = tries[kept_of_refused([t[0].verdict for t in tries])]
       reg.seconds = dict(spent)
     reg.seconds = {**seconds, **reg.seconds}
     return reg, f1, f2
