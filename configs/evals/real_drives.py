@@ -22,10 +22,9 @@ pair on the five drives' scans: drop it (`--config.evals.drives.rows=...`) for a
 
 Expected (2-core VM): the defaults register 94.9 % of the five drives' 214 pairs, 72.5 %
 of the Livox drive's 80 and 100 % of Riverside02's 128 (`--config.checkpoints.ours_mined=ours`
-for `ours`, measured before `pipeline.kept_of_refused`: 93.0, 67.5 and 96.9 %), and their
-verdict trusts 98.0, 98.3 and 98.4 % of the right poses and refuses 90.9 and 95.5 % of the
-wrong ones (Riverside02 has none); docs/notes/real_drives.md has the tables and what each
-stage loses.
+for `ours`), and their verdict trusts 98.0, 98.3 and 98.4 % of the right poses and refuses
+90.9 and 95.5 % of the wrong ones (Riverside02 has none); docs/notes/real_drives.md has the
+tables and what each stage loses.
 """
 
 import ml_collections
