@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from ssd_jax import geometry, inference, pretrained
-from ssd_jax.data import clean, groundtruth, io, kitti, preprocess
+from ssd_jax.data import clean, groundtruth, io, kitti
 from ssd_jax.infra import errors
 from ssd_jax.registration import bev, cloud_features, free_space, metrics, outputs, pipeline
-from ssd_jax.registration import prepared
+from ssd_jax.registration import keypoints, prepared
 from ssd_jax.registration import uncertainty, verdict, verification
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
@@ -130,7 +130,7 @@ def test_a_cloud_sparser_than_the_verdicts_calibration_is_told_so():
   def lattice(step):
     axis = np.arange(12) * step
     return np.stack(np.meshgrid(axis, axis, axis), -1).reshape(-1, 3)
-  assert preprocess.point_spacing(lattice(0.7)) == pytest.approx(0.7)
+  assert keypoints.point_spacing(lattice(0.7)) == pytest.approx(0.7)
   _, sparse = cloud_features.to_grid(lattice(0.7), 0.2)
   assert sparse.startswith('1,728 points, no denser than the 0.2 m grid: used as given')
   assert '0.7 m apart (median)' in sparse and 'may refuse right poses' in sparse

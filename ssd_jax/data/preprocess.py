@@ -6,7 +6,6 @@ Host-side Open3D; every function is deterministic for the same input.
 from __future__ import annotations
 
 import numpy as np
-from scipy import spatial
 
 
 def even_stride(n: int, count: int) -> int:
@@ -27,16 +26,6 @@ def voxel_downsample(points: np.ndarray, voxel_size: float, dtype=np.float32) ->
     return np.asarray(points, dtype)
   down = _o3d_cloud(points).voxel_down_sample(voxel_size)
   return np.asarray(down.points, dtype)
-
-
-def point_spacing(points: np.ndarray, probes: int = 2000) -> float:
-  """Metres: the median distance from a point of points [N, 3] to its nearest neighbour
-  (over an even stride of `probes` of them); 0 for fewer than 2 points."""
-  points = np.asarray(points, np.float64)
-  if len(points) < 2:
-    return 0.0
-  probe = points[::even_stride(len(points), probes)]
-  return float(np.median(spatial.cKDTree(points).query(probe, 2)[0][:, 1]))
 
 
 def occupied_voxels(points: np.ndarray, voxel_size: float) -> int:

@@ -26,12 +26,9 @@ VOXEL_SIZE = 0.2
 # Clouds voxelised at 0.2 m on another grid keep 0.69-1.0 (every test set here), raw
 # 64-beam scans ~0.3, anything twice as dense as the grid under 0.3.
 ON_GRID = 0.6
-# Metres: the verdict's fit (0.3 m) and free space (1-degree directions) were calibrated on
-# clouds whose points lie 0.1-0.3 m apart (median nearest neighbour: every development
-# set on the 0.2 m grid). Real drives thinned to 0.5 m voxels (0.38 m apart) keep its
-# precision and recall; at 1 m voxels (0.66 m) a scan's sparse returns leave directions
-# where only the background answered, and 8 of 27 right poses were refused as free-space
-# conflicts (docs/notes/real_drives.md). A cloud sparser than this is told so.
+# Metres: the verdict was calibrated on clouds whose points lie 0.1-0.3 m apart (median
+# nearest neighbour); real drives thinned to 0.38 m keep its precision and recall, at 0.66 m
+# 8 of 27 right poses were refused as free-space conflicts. A sparser cloud is told so.
 SPARSE_SPACING = 0.5
 
 
@@ -132,7 +129,7 @@ def to_grid(points: np.ndarray, voxel: float) -> tuple[np.ndarray, str]:
   # Counted first (numpy): a cloud already on such a grid needs no Open3D at all.
   if preprocess.occupied_voxels(points, voxel) >= ON_GRID * len(points):
     note = f'{len(points):,} points, no denser than the {voxel:g} m grid: used as given'
-    spacing = preprocess.point_spacing(points)
+    spacing = keypoints_lib.point_spacing(points)
     if spacing > SPARSE_SPACING:
       note += (f'; its points lie {spacing:.2g} m apart (median): the verdict, calibrated '
                'on clouds 0.1-0.3 m apart, may refuse right poses')

@@ -40,12 +40,10 @@ RETRY_NOTES = {'structure': 'registered again with keypoints on the structure ab
                        'refused ({})',
                'bev': "registered again with the banded BEV search's poses, the first pose "
                       'refused ({})'}
-# Where every try's pose is refused, the first stands unless the scans contradict it (the
-# verdict's reasons in CONTRADICTED): then the pose the scans do not contradict that ranks
-# first as the verification ranks candidates (`kept_of_refused`) is returned, refused, with
-# this note where a retry found it. Such a first pose is often a wrong one laid where the
-# other scan saw through, a retry's a right pose refused for a low overlap or a near twin
-# (`ambiguous candidates`); a first pose refused as ambiguous may be the right one.
+# The verdict's reasons that contradict a pose, not merely doubt it (`kept_of_refused`): a
+# contradicted first pose is often a wrong one laid where the other scan saw through, a
+# retry's refused one a right pose of low overlap or with a near twin; a first pose refused
+# as ambiguous may be the right one. The note of a retry's refused pose returned:
 CONTRADICTED = ('free-space conflict', 'seen from behind')
 REFUSED_RETRY_NOTE = ("every pose refused; this one, the {} try's, ranks first as the "
                       'verification ranks them')
