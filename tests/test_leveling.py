@@ -76,6 +76,44 @@ def test_a_pitched_unit_seeing_little_ground_is_levelled_and_a_ramp_through_wall
   assert leveling.ground(np.concatenate([_walls(), ramp])) is None
 
 
+def _surfaces(rng, *boxes) -> np.ndarray:
+  """Points spread evenly over axis-aligned boxes ((x0, x1), (y0, y1), (z0, z1)), one of
+  them flat: walls, floors."""
+  parts = []
+  for box in boxes:
+    lo, hi = np.array(box, np.float64).T
+    n = int(200 * np.prod(np.maximum(hi - lo, 0.0)[np.argsort(hi - lo)[1:]]))
+    parts.append(rng.uniform(lo, hi, (n, 3)))
+  return np.concatenate(parts)
+
+
+def test_a_pitched_scan_of_walls_without_ground_is_levelled_by_its_walls_but_a_room_is_not():
+  # A hand-held unit pitched up 25 degrees at a building's corner and a facade beyond it,
+  # none of the ground in view (HKU_MB's pitched scans): up is what its walls stand along.
+  rng = np.random.default_rng(0)
+  corner = _surfaces(rng, ((10, 10), (-10, 5), (-1.5, 6)), ((0, 10), (5, 5), (-1.5, 6)),
+                     ((12, 25), (-12, -12), (-1.5, 8)))
+  r = _tilt(8.0, -25.0)
+  lv = leveling.level(corner @ r.T)
+  assert lv.by_walls and lv.turned and 20.0 < lv.tilt_deg < 32.0
+  assert np.degrees(np.arccos(np.clip(lv.normal @ r[:, 2], -1, 1))) < 1.0
+  assert 'levelled by its walls' in leveling.level_for(corner @ r.T, 'ground', 'c')[1]
+  # The same walls upright need no turn; a pitched corridor (walls of one heading) is level
+  # about any up turned about their normal: both are left as they are, said so.
+  for scene, turn in ((corner, np.eye(3)), (_walls(), r)):
+    lv = leveling.level(scene @ turn.T)
+    assert not lv.turned and 'no ground plane found' in lv.note
+  # A room turned 60 degrees about x: its floor and ceiling are as level about the room's
+  # y axis, 30 degrees from z, as its walls are about its up; the y walls along that axis
+  # tell it from an up. (Its y wall below the sensor passes for a ground, 30 degrees off,
+  # as on the indoor Livox drive: the ground's rule, not the walls'.)
+  room = _surfaces(rng, ((-4, 4), (-3, 3), (-1.5, -1.5)), ((-4, 4), (-3, 3), (1.5, 1.5)),
+                   ((-4, -4), (-3, 3), (-1.5, 1.5)), ((4, 4), (-3, 3), (-1.5, 1.5)),
+                   ((-4, 4), (-3, -3), (-1.5, 1.5)), ((-4, 4), (3, 3), (-1.5, 1.5)))
+  assert leveling.walls(room @ _tilt(60.0, 0.0).T) is None
+  assert leveling.walls(corner @ r.T) is not None
+
+
 def test_gravity_gives_the_turn_that_makes_up_the_z_axis():
   r = _tilt(12.0, -7.0)
   lv = leveling.from_gravity(r @ np.array([0.0, 0.0, -9.81]))

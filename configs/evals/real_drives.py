@@ -20,10 +20,10 @@ FPFH pipeline; KISS-Matcher + ICP where `kiss-matcher` is installed (pip install
 '.[bench]'). A set not made is skipped and the report says so. Open3D's row takes ~13 s a
 pair on the five drives' scans: drop it (`--config.evals.drives.rows=...`) for a quick run.
 
-Expected (2-core VM): the defaults register 94.9 % of the five drives' 214 pairs, 72.5 %
+Expected (2-core VM): the defaults register 94.9 % of the five drives' 214 pairs, 73.8 %
 of the Livox drive's 80 and 100 % of Riverside02's 128 (`--config.checkpoints.ours_mined=ours`
 for `ours`), and their verdict trusts 98.0, 98.3 and 98.4 % of the right poses and refuses
-90.9 and 95.5 % of the wrong ones (Riverside02 has none); docs/notes/real_drives.md has the
+90.9 and 95.2 % of the wrong ones (Riverside02 has none); docs/notes/real_drives.md has the
 tables and what each stage loses.
 """
 

@@ -5,7 +5,9 @@ A sensor that is not level (a robot on a slope, a unit mounted pitched down, a b
 hand-held scanner) sees its ground tilted. The ground is the largest plane below the sensor
 whose normal is within MAX_TILT_DEG of the scan's z: `ground` finds it by RANSAC over
 3-point samples of points whose own normals are that steep, and `level` gives the rotation
-that turns its normal onto z (the smallest one: no turn about z is added). A registration
+that turns its normal onto z (the smallest one: no turn about z is added). A scan that
+shows no ground but walls of two headings (a hand-held unit pitched up at a building) is
+levelled by them (`walls`). A registration
 of levelled clouds is composed back into the clouds' own frames (`Leveling.matrix`).
 """
 
@@ -63,6 +65,29 @@ MIN_POINTS_TO_LEVEL = 1500
 # stands for stride times as many points of the scan.
 SEARCH_POINTS = 2_000
 TRIALS = 300
+# A scan with no ground (a hand-held unit pitched up at a building, its view all walls) is
+# levelled by its walls (`walls`): the up direction, within PITCHED_DEG to
+# MAX_WALL_TILT_DEG of the scan's z, about which MIN_WALL_SHARE of its normals lie within
+# WALL_DEG of horizontal. On the development drives such scans (HKU_MB, pitched 15-33
+# degrees) find their walls' up within 0.3-2.1 degrees of the drive's, with 40-69 % of
+# their normals on walls; a scan of trees or slopes scatters its normals (one of them:
+# 19 %).
+WALL_DEG = 8.0
+MIN_WALL_SHARE = 0.35
+MAX_WALL_TILT_DEG = 35.0
+# The walls face two headings at least: the second eigenvalue of their normals' scatter
+# is MIN_WALL_SPREAD of the first or more (HKU_MB's: 0.13-0.41). The normals of one wall,
+# or of a corridor's two, are horizontal about any up turned about them.
+MIN_WALL_SPREAD = 0.1
+# At most MAX_ALONG_UP of the normals lie within WALL_DEG of the up found (a roof, a
+# ceiling): a room's floor, ceiling and walls stand at right angles, so its walls are
+# level about a horizontal axis as well as about its up. An indoor Livox scan pitched 73
+# degrees found an axis 90 degrees off with 12 % of its normals along it; HKU_MB's
+# pitched outdoor scans hold 0-8 % along their up.
+MAX_ALONG_UP = 0.1
+# Up directions tried: an even spiral over the cap within MAX_WALL_TILT_DEG of z, ~1 degree
+# apart, the best refined by the walls' normals.
+WALL_DIRECTIONS = 4_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,6 +101,7 @@ class Leveling:
   tilt_deg: float
   note: str = ''
   sparse: bool = False   # too few points to look for its ground: used as it is
+  by_walls: bool = False   # no ground found: `normal` is the walls' up (`walls`)
 
   @property
   def turned(self) -> bool:
@@ -192,13 +218,50 @@ def ground(points: np.ndarray, sensor_at_origin: bool = True, seed: int = 0,
   return normal, height, count
 
 
+def _cap(count: int, max_tilt_deg: float) -> np.ndarray:
+  """[count, 3] unit vectors spread evenly over the cap within max_tilt_deg of +z."""
+  i = np.arange(count) + 0.5
+  z = 1.0 - i / count * (1.0 - np.cos(np.deg2rad(max_tilt_deg)))
+  r = np.sqrt(1.0 - z ** 2)
+  phi = i * np.pi * (3.0 - np.sqrt(5.0))
+  return np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
+
+
+def walls(points: np.ndarray, max_tilt_deg: float = MAX_WALL_TILT_DEG) -> np.ndarray | None:
+  """The up direction of a scan by its walls: points [N, 3] metres -> unit [3] within
+  PITCHED_DEG to max_tilt_deg of z about which MIN_WALL_SHARE of the normals (at
+  SEARCH_POINTS of them) lie within WALL_DEG of horizontal, facing two headings at least
+  (MIN_WALL_SPREAD), with at most MAX_ALONG_UP along it, or None."""
+  points = np.asarray(points, np.float64)
+  at = np.arange(0, len(points), preprocess.even_stride(len(points), SEARCH_POINTS))
+  normals = icp.normals(points, at=at)
+  flat = np.sin(np.deg2rad(WALL_DEG))
+  up = _cap(WALL_DIRECTIONS, max_tilt_deg)
+  up = up[int(np.argmax((np.abs(normals @ up.T) < flat).sum(0)))]
+  for _ in range(3):   # the least axis of the walls' normals: the up they are level about
+    on = normals[np.abs(normals @ up) < flat]
+    if len(on) < 3:
+      return None
+    up = icp.least_axis((on.T @ on)[None])[0]
+    up *= 1.0 if up[2] >= 0 else -1.0
+  tilt = np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0)))
+  share = np.mean(np.abs(normals @ up) < flat)
+  along = np.mean(np.abs(normals @ up) > np.cos(np.deg2rad(WALL_DEG)))
+  spread = np.linalg.eigvalsh(on.T @ on)
+  if (share < MIN_WALL_SHARE or along > MAX_ALONG_UP or spread[1] < MIN_WALL_SPREAD * spread[2]
+      or not PITCHED_DEG <= tilt <= max_tilt_deg):
+    return None
+  return up
+
+
 def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
           min_tilt_deg: float = 0.0, sensor_at_origin: bool = True) -> Leveling:
   """The `Leveling` of a scan (points [N, 3] metres; `sensor_at_origin` as for `ground`, a
   cloud without a ground below its origin searched again without that rule):
   the turn about `center` (default the origin) that makes its ground horizontal; no turn
-  where the ground is tilted by less than `min_tilt_deg`, or where none is found (then
-  `note` says so). A scan of fewer than MIN_POINTS_TO_LEVEL points is used as it is
+  where the ground is tilted by less than `min_tilt_deg`. A scan in its sensor's frame with
+  no ground is levelled by its walls where they tell its up (`walls`, `by_walls`), else
+  left as it is (then `note` says so). A scan of fewer than MIN_POINTS_TO_LEVEL points is used as it is
   (`sparse` set, no note)."""
   if len(points) < MIN_POINTS_TO_LEVEL:
     return dataclasses.replace(unchanged(center), sparse=True)
@@ -209,6 +272,12 @@ def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
     # frame, so its ground must be within OFF_SENSOR_MAX_TILT_DEG of z (a pitched scan of
     # walls has steep planes to mistake for one).
     found = ground(points, False, seed, OFF_SENSOR_MAX_TILT_DEG)
+  if found is None and sensor_at_origin:
+    up = walls(points)
+    if up is not None:
+      return Leveling(rotation_onto_z(up), np.zeros(3) if center is None else
+                      np.asarray(center, np.float64), up,
+                      float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0)))), by_walls=True)
   if found is None:
     return unchanged(center, 'no ground plane found to level it by (a plane below the '
                      f'sensor within {MAX_TILT_DEG:g} degrees of its z axis, holding '
@@ -253,6 +322,9 @@ def level_for(points: np.ndarray, mode: str, name: str, sensor_at_origin: bool =
                 'used as it is')
   if lv.note:
     return lv, f'{name}: {lv.note}'
+  if lv.by_walls:
+    return lv, (f'{name}: no ground found; levelled by its walls, tilted {lv.tilt_deg:.1f} '
+                'degrees')
   if lv.turned:
     return lv, f'{name}: levelled, its ground {lv.tilt_deg:.1f} degrees off horizontal'
   return lv, ''
