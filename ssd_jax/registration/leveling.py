@@ -7,8 +7,8 @@ whose normal is within MAX_TILT_DEG of the scan's z: `ground` finds it by RANSAC
 3-point samples of points whose own normals are that steep, and `level` gives the rotation
 that turns its normal onto z (the smallest one: no turn about z is added). A scan that
 shows no ground but walls of two headings (a hand-held unit pitched up at a building) is
-levelled by them (`walls`). A registration
-of levelled clouds is composed back into the clouds' own frames (`Leveling.matrix`).
+levelled by them (`walls`). A registration of levelled clouds is composed back into the
+clouds' own frames (`Leveling.matrix`).
 """
 
 from __future__ import annotations
@@ -261,8 +261,8 @@ def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
   the turn about `center` (default the origin) that makes its ground horizontal; no turn
   where the ground is tilted by less than `min_tilt_deg`. A scan in its sensor's frame with
   no ground is levelled by its walls where they tell its up (`walls`, `by_walls`), else
-  left as it is (then `note` says so). A scan of fewer than MIN_POINTS_TO_LEVEL points is used as it is
-  (`sparse` set, no note)."""
+  left as it is (then `note` says so). A scan of fewer than MIN_POINTS_TO_LEVEL points is
+  used as it is (`sparse` set, no note)."""
   if len(points) < MIN_POINTS_TO_LEVEL:
     return dataclasses.replace(unchanged(center), sparse=True)
   found = ground(points, sensor_at_origin, seed)
