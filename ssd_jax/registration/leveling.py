@@ -244,11 +244,12 @@ def walls(points: np.ndarray, max_tilt_deg: float = MAX_WALL_TILT_DEG) -> np.nda
       return None
     up = icp.least_axis((on.T @ on)[None])[0]
     up *= 1.0 if up[2] >= 0 else -1.0
-  tilt = np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0)))
-  share = np.mean(np.abs(normals @ up) < flat)
-  along = np.mean(np.abs(normals @ up) > np.cos(np.deg2rad(WALL_DEG)))
+  cos = np.abs(normals @ up)
+  on = normals[cos < flat]
   spread = np.linalg.eigvalsh(on.T @ on)
-  if (share < MIN_WALL_SHARE or along > MAX_ALONG_UP or spread[1] < MIN_WALL_SPREAD * spread[2]
+  tilt = np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0)))
+  if (len(on) < MIN_WALL_SHARE * len(normals) or spread[1] < MIN_WALL_SPREAD * spread[2]
+      or np.mean(cos > np.cos(np.deg2rad(WALL_DEG))) > MAX_ALONG_UP
       or not PITCHED_DEG <= tilt <= max_tilt_deg):
     return None
   return up
@@ -272,12 +273,11 @@ def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
     # frame, so its ground must be within OFF_SENSOR_MAX_TILT_DEG of z (a pitched scan of
     # walls has steep planes to mistake for one).
     found = ground(points, False, seed, OFF_SENSOR_MAX_TILT_DEG)
+  by_walls = False
   if found is None and sensor_at_origin:
     up = walls(points)
     if up is not None:
-      return Leveling(rotation_onto_z(up), np.zeros(3) if center is None else
-                      np.asarray(center, np.float64), up,
-                      float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0)))), by_walls=True)
+      found, by_walls = (up,), True
   if found is None:
     return unchanged(center, 'no ground plane found to level it by (a plane below the '
                      f'sensor within {MAX_TILT_DEG:g} degrees of its z axis, holding '
@@ -288,7 +288,7 @@ def level(points: np.ndarray, center: np.ndarray | None = None, seed: int = 0,
   if tilt < min_tilt_deg:
     return dataclasses.replace(unchanged(center), normal=normal, tilt_deg=tilt)
   return Leveling(rotation_onto_z(normal), np.zeros(3) if center is None else
-                  np.asarray(center, np.float64), normal, tilt)
+                  np.asarray(center, np.float64), normal, tilt, by_walls=by_walls)
 
 
 def from_gravity(gravity, center: np.ndarray | None = None) -> Leveling:
