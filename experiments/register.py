@@ -57,7 +57,8 @@ flags.DEFINE_enum('level', DEFAULTS.level, options_lib.LEVELS,
                   'ground: level each tilted scan by its ground first; none: take z as up.')
 flags.DEFINE_list('retry', list(DEFAULTS.retry), 'A pose the verdict refuses is registered '
                   'again with each in turn: structure (keypoints above the ground), learned '
-                  "(the model's own sampling), fpfh, bev (the banded BEV search); none.")
+                  "(the model's own sampling), fpfh, bev (the banded BEV search), robust (its "
+                  'candidates again, aligned by a robust ICP); none.')
 flags.DEFINE_string('checkpoint', None, 'Shipped model, export or run (default: '
                     f'{pretrained.DEFAULT}, or ours_detector for learned keypoints).')
 flags.DEFINE_string('groundtruth', None, 'groundtruths.txt holding the pairs (optional).')

@@ -74,3 +74,38 @@ def test_occupied_voxels_counts_what_voxel_downsample_returns():
     for voxel in (0.2, 1.0):
       assert preprocess.occupied_voxels(points, voxel) == len(
           preprocess.voxel_downsample(points, voxel))
+
+
+def test_a_robust_icp_is_not_dragged_by_what_one_scan_alone_saw():
+  """An L of two walls on a floor; cloud 2 also sees a hedge 0.6 m before one wall, which
+  cloud 1 never saw. From 0.3 m and 1 degree off, the plain ICP pairs the hedge with the
+  wall and ends 0.4 m off; the robust one ends on the pose, where Open3D's point-to-plane
+  ICP with its Geman-McClure loss (k = the scale squared) ends."""
+  import open3d as o3d  # pylint: disable=g-import-not-at-top
+  rng = np.random.default_rng(0)
+  walls = lambda n: np.concatenate([
+      np.c_[rng.uniform(0, 20, (2 * n, 2)), np.zeros(2 * n)],
+      np.c_[rng.uniform(0, 20, n), np.zeros(n), rng.uniform(0, 4, n)],
+      np.c_[np.zeros(n), rng.uniform(0, 20, n), rng.uniform(0, 4, n)]])
+  hedge = np.c_[rng.uniform(0, 20, 4000), np.full(4000, 0.6), rng.uniform(0, 3, 4000)]
+  target = walls(3000)
+  t_true = geometry.make_transform(geometry.rotation_z(np.radians(10.0)), np.array([1.0, 2.0, 0.0]))
+  source = (np.concatenate([walls(1500), hedge]) - t_true[:3, 3]) @ t_true[:3, :3]
+  start = t_true @ geometry.make_transform(geometry.rotation_z(np.radians(1.0)),
+                                           np.array([0.2, -0.2, 0.0]))
+  surface = icp.surface(target)
+  off = lambda t: np.linalg.norm(t[:3, 3] - t_true[:3, 3])
+  plain, _ = icp.point_to_plane(surface, source, start, (1.0, 0.5))
+  robust, _ = icp.point_to_plane(surface, source, start, (1.0, 0.5), robust=True)
+  assert off(plain) > 0.3 and off(robust) < 0.03, (off(plain), off(robust))
+  reg = o3d.pipelines.registration
+  tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target))
+  tgt.normals = o3d.utility.Vector3dVector(surface.normals_at(np.arange(len(target))))
+  src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source))
+  expected = start
+  for distance in (1.0, 0.5):
+    loss = reg.GMLoss(k=(icp.ROBUST_SCALE * distance) ** 2)
+    expected = np.asarray(reg.registration_icp(
+        src, tgt, distance, expected, reg.TransformationEstimationPointToPlane(loss),
+        reg.ICPConvergenceCriteria(max_iteration=30)).transformation)
+  np.testing.assert_allclose(robust, expected, atol=1e-3)

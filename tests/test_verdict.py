@@ -9,7 +9,7 @@ from ssd_jax import geometry, inference, pretrained
 from ssd_jax.data import clean, groundtruth, io, kitti
 from ssd_jax.infra import errors
 from ssd_jax.registration import bev, cloud_features, free_space, metrics, outputs, pipeline
-from ssd_jax.registration import keypoints, prepared
+from ssd_jax.registration import icp, keypoints, prepared
 from ssd_jax.registration import uncertainty, verdict, verification
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
@@ -347,10 +347,37 @@ def test_a_refused_pose_is_registered_again_with_the_models_own_sampling(monkeyp
   # samples each ball as the model was trained, from the structure.
   retries = lambda m, **kw: list(pipeline.Registrar(  # pylint: disable=protected-access
       lambda key: cloud1, model=m, options=options_lib.Options(**kw))._retries)
-  assert retries(model) == ['structure', 'learned', 'fpfh', 'bev']
-  assert retries(model, draws=0) == ['structure', 'fpfh', 'bev']
-  assert retries(dataclasses.replace(model, keypoints='structure'), draws=0) == ['fpfh', 'bev']
-  assert retries(model, keypoints='iss') == ['learned', 'fpfh', 'bev']
+  assert retries(model) == ['structure', 'learned', 'fpfh', 'bev', 'robust']
+  assert retries(model, draws=0) == ['structure', 'fpfh', 'bev', 'robust']
+  assert retries(dataclasses.replace(model, keypoints='structure'), draws=0) == [
+      'fpfh', 'bev', 'robust']
+  assert retries(model, keypoints='iss') == ['learned', 'fpfh', 'bev', 'robust']
   assert retries(model, bev=0) == ['structure', 'learned', 'fpfh']   # no BEV search
   with pytest.raises(errors.UserError, match='retry'):
     options_lib.Options(retry='learned,sift')
+
+
+@pytest.mark.real_data
+def test_a_refused_pose_is_registered_again_by_the_robust_icp(monkeypatch):
+  """Where the plain ICP drags every candidate off (here 3 m along the street, as the points
+  two far scans do not share drag a right pose), every earlier try is refused; the 'robust'
+  retry aligns the 'bev' try's candidates by the robust ICP and keeps the right pose,
+  trusted, with its note."""
+  cloud1, cloud2, t12 = _drive_pair(0, 7)
+  align = icp.point_to_plane
+  off = geometry.make_transform(np.eye(3), np.array([3.0, 0.0, 0.0]))
+
+  def dragged(*args, robust=False, **kwargs):
+    t, fitness = align(*args, robust=robust, **kwargs)
+    return (t if robust else off @ t), fitness
+
+  monkeypatch.setattr(icp, 'point_to_plane', dragged)
+  run = lambda retry: pipeline.register(target=cloud1, source=cloud2,
+                                        model=pretrained.load(pretrained.DEFAULT),
+                                        options=options_lib.Options(retry=retry))[0]
+  first, bev, again = run('none'), run('bev'), run('bev,robust')
+  for refused in (first, bev):
+    assert not refused.verdict.registered
+    assert not metrics.registration_errors(t12, refused.transform)['success']
+  assert again.verdict.registered and metrics.registration_errors(t12, again.transform)['success']
+  assert pipeline.RETRY_NOTES['robust'].format(first.verdict.reason) in again.notes

@@ -125,6 +125,22 @@ def _increment(x: np.ndarray) -> np.ndarray:
   return t
 
 
+# The robust ICP's Geman-McClure scale, a share of the correspondence distance: two scans
+# sharing a fifth of their view pair most of cloud 2's points with a surface within 1 m that
+# is not theirs (a hedge before a wall, the far side of a street), and squared residuals let
+# those drag a right pose 17 degrees off on a real far pair; at a quarter of the distance a
+# residual of half of it weighs 0.04 (docs/notes/real_drives.md: the scales measured).
+ROBUST_SCALE = 0.25
+
+
+def geman_mcclure(residual: np.ndarray, scale: float) -> np.ndarray:
+  """Weights [C] of point-to-plane residuals [C] (metres) under a Geman-McClure kernel of
+  `scale` metres: (s^2 / (s^2 + r^2))^2, 1 at r = 0 (Open3D's GMLoss with k = s^2, up to a
+  constant factor, which a weighted least squares step does not see)."""
+  s2 = scale ** 2
+  return (s2 / (s2 + residual ** 2)) ** 2
+
+
 def correspondences(target: Surface, moved: np.ndarray, distance: float):
   """moved [M, 3] -> (has a partner [M] bool, partner index [M], distance [M]): the
   nearest target point within `distance` metres."""
@@ -135,10 +151,14 @@ def correspondences(target: Surface, moved: np.ndarray, distance: float):
 
 
 def point_to_plane(target: Surface, source: np.ndarray, transform: np.ndarray,
-                   distances=(1.0,), iterations: int = 30) -> tuple[np.ndarray, float]:
+                   distances=(1.0,), iterations: int = 30,
+                   robust: bool = False) -> tuple[np.ndarray, float]:
   """ICP of source points [M, 3] onto `target` from T_12 [4, 4], with correspondences
   within each of `distances` (metres) in turn, at most `iterations` steps each ->
-  (T_12, fitness: share of source points with a partner at the last distance)."""
+  (T_12, fitness: share of source points with a partner at the last distance). `robust`:
+  each step weighs the residuals by `geman_mcclure` at ROBUST_SCALE of the distance
+  (iteratively reweighted least squares), so that points paired with a surface that is
+  not theirs do not drag the pose."""
   source = np.asarray(source, np.float64)
   t = np.array(transform, np.float64)
   fitness = 0.0
@@ -160,8 +180,11 @@ def point_to_plane(target: Surface, source: np.ndarray, transform: np.ndarray,
       p, q, n = moved[found], target.points[idx[found]], target.normals_at(idx[found])
       jacobian = np.concatenate([np.cross(p, n), n], 1)             # [C, 6]
       residual = np.sum((p - q) * n, 1)
+      weight = (geman_mcclure(residual, distance * ROBUST_SCALE) if robust
+                else np.ones_like(residual))
       try:
-        x = np.linalg.solve(jacobian.T @ jacobian, -jacobian.T @ residual)
+        x = np.linalg.solve(jacobian.T @ (jacobian * weight[:, None]),
+                            -jacobian.T @ (weight * residual))
       except np.linalg.LinAlgError:
         break
       t = _increment(x) @ t

@@ -20,8 +20,9 @@ ESTIMATORS = ('rigid', 'upright')
 SAMPLINGS = ('auto', 'compatible', 'uniform')
 LEVELS = ('none', 'ground')
 # Keypoints, descriptors and whole-scene searches that fail on different pairs: where one's
-# candidates hold no right pose, another's sometimes do (docs/notes/real_drives.md).
-RETRIES = ('structure', 'learned', 'fpfh', 'bev')
+# candidates hold no right pose, another's sometimes do; and an ICP that does not let the
+# points two far scans do not share drag a right candidate away (docs/notes/real_drives.md).
+RETRIES = ('structure', 'learned', 'fpfh', 'bev', 'robust')
 
 
 # How the learned descriptor samples each ball where the poses are verified (the register
@@ -63,6 +64,8 @@ class Options:
               they apply: upright estimator and verify > 0 (`bev_candidates`).
   bev_banded  the banded BEV search's best poses, ranked as the verification picks, join
               the BEV search's (`prepared.PreparedPair.bev_poses`): the 'bev' retry's.
+  robust_icp  the verification aligns the candidates by ICP with a robust kernel
+              (`icp.geman_mcclure`): the 'robust' retry's.
   icp         point-to-plane ICP from the chosen pose (1 m, then 0.5 m).
   free_space  each cloud's origin is its sensor, where the cloud looks like a scan in its
               sensor's frame (`free_space.sensor_centred`): the verification and the
@@ -90,7 +93,8 @@ class Options:
               `cloud_features.keypoint_domain`), 'learned' (the model's own sampling of
               its balls), 'fpfh' (the classical descriptor), 'bev' (the first try's
               descriptors, with the banded BEV search's poses: `bev_banded`; where
-              `bev_candidates` apply).
+              `bev_candidates` apply), 'robust' (the 'bev' try's candidates, aligned by
+              the robust ICP: `robust_icp`).
   """
   keypoints: str = 'auto'
   descriptor: str = 'learned'
@@ -107,6 +111,7 @@ class Options:
   retry: tuple[str, ...] = RETRIES
   bev_banded: bool = False
   free_space: bool = True
+  robust_icp: bool = False
 
   def __post_init__(self):
     if isinstance(self.retry, str):

@@ -109,7 +109,8 @@ def estimate(f1: Features, f2: Features, seed: int = 0, inlier_threshold: float 
 
 def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
            inlier_threshold: float = 1.0, bev_candidates: int = 0,
-           confident_only: bool = False, bev_banded: bool = False) -> Registration:
+           confident_only: bool = False, bev_banded: bool = False,
+           robust: bool = False) -> Registration:
   """`reg` with the candidate pose (`estimate(candidates=k)`) that, refined by ICP, lays the
   most of cloud 2's structure on cloud 1 (`verification.verify`). points1, points2: the
   clouds [N, 3] (metres near the origin, in the features' coordinates) or their
@@ -126,7 +127,8 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
   'bev' (0 where it was not needed) and 'verify'. `confident_only`: only a pose fitting
   CONFIDENT_FITNESS is of use (no BEV search then): candidates far from it are not
   refined in full (`verification.verify`); so it is for RANSAC's candidates alone before
-  the BEV search's join them."""
+  the BEV search's join them. `robust`: the candidates aligned by the robust ICP
+  (`verification.verify`)."""
   t0 = time.perf_counter()
   pair = prepared.prepare_pair(points1, points2)
   target, source = pair.cloud1.target, pair.cloud2.source
@@ -142,7 +144,7 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
       lambda c: verdict_lib.seen_from_behind(fit[c], pair.behind(poses[c])))[0])
   best, refined, fitness = verification.verify(target, source, candidates, memo=pair.memo,
                                                confident_only=confident_only or bev_candidates > 0,
-                                               choose=choose)
+                                               choose=choose, robust=robust)
   seconds = {**reg.seconds, 'verify': time.perf_counter() - t0}
   if bev_candidates > 0:
     seconds['bev'] = 0.0
@@ -156,7 +158,8 @@ def verify(reg: Registration, f1: Features, f2: Features, points1, points2=None,
       candidates = np.concatenate([candidates, *bev_poses])
       t2 = time.perf_counter()
       best, refined, fitness = verification.verify(target, source, candidates,
-                                                   memo=pair.memo, choose=choose)
+                                                   memo=pair.memo, choose=choose,
+                                                   robust=robust)
       seconds['bev'] = t2 - t1
       seconds['verify'] += time.perf_counter() - t2
   xyz1 = f1.xyz[reg.matches[:, 0]].astype(np.float64)
@@ -171,7 +174,7 @@ def coarse_to_fine(levels1: Sequence[Callable[[], Features]],
                    seed: int = 0, inlier_threshold: float = 1.0, confidence: float = 0.99,
                    max_trials: int = 10_000, estimator: str = 'upright', candidates: int = 10,
                    bev_candidates: int = 0, verified: bool = True, progress=None,
-                   sampling: str = 'auto', bev_banded: bool = False
+                   sampling: str = 'auto', bev_banded: bool = False, robust: bool = False
                    ) -> tuple[Registration, Features, Features]:
   """`estimate` (`candidates` poses) and, where `verified`, `verify` on each level of the
   two clouds' features in turn (callables, coarse first: `FeatureLevels.levels`), until a
@@ -180,7 +183,7 @@ def coarse_to_fine(levels1: Sequence[Callable[[], Features]],
   The last level is the registration without levels, the BEV search's candidates
   included; the ones before only end it early (unverified, only the last level runs).
   points1, points2: as for `verify`; `progress(stage)` as for `register`, on the first
-  level tried; `sampling` as for `estimate`, `bev_banded` as for `verify`.
+  level tried; `sampling` as for `estimate`, `bev_banded` and `robust` as for `verify`.
   -> (registration, features of cloud 1, of cloud 2) of the level that decided, its
   `seconds` summed over the levels tried and `levels_tried` set."""
   if not levels1 or len(levels1) != len(levels2):
@@ -201,7 +204,7 @@ def coarse_to_fine(levels1: Sequence[Callable[[], Features]],
       if n == first:
         stage('verification')
       reg = verify(reg, f1, f2, pair, None, inlier_threshold, bev_candidates if last else 0,
-                   confident_only=not last, bev_banded=bev_banded)
+                   confident_only=not last, bev_banded=bev_banded, robust=robust)
     for name, s in reg.seconds.items():
       spent[name] = spent.get(name, 0.0) + s
     if last or verification.clearly_confident(reg.verified_poses, reg.verified_fitness):

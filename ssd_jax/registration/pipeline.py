@@ -39,7 +39,9 @@ RETRY_NOTES = {'structure': 'registered again with keypoints on the structure ab
                'fpfh': "registered again with FPFH descriptors, the learned ones' pose "
                        'refused ({})',
                'bev': "registered again with the banded BEV search's poses, the first pose "
-                      'refused ({})'}
+                      'refused ({})',
+               'robust': "registered again with the banded BEV search's poses aligned by a "
+                         'robust ICP, the first pose refused ({})'}
 # The verdict's reasons that contradict a pose, not merely doubt it (`kept_of_refused`): a
 # contradicted first pose is often a wrong one laid where the other scan saw through, a
 # retry's refused one a right pose of low overlap or with a near twin; a first pose refused
@@ -147,10 +149,10 @@ class Registrar:
     # the first differs from it (keypoints from every point; balls sampled otherwise).
     self._retries = {}
     for name in self._options.retries:
-      if name == 'bev':
+      if name in ('bev', 'robust'):
         if self._options.bev_candidates:
-          self._retries[name] = (self._options.descriptor,
-                                 dataclasses.replace(self._options, bev_banded=True), None)
+          self._retries[name] = (self._options.descriptor, dataclasses.replace(
+              self._options, bev_banded=True, robust_icp=name == 'robust'), None)
       elif name == 'fpfh':
         self._retries[name] = ('fpfh', dataclasses.replace(self._options, descriptor='fpfh'),
                                None)
@@ -319,7 +321,8 @@ class Registrar:
         pair_levels[0].levels, pair_levels[1].levels, pair, seed=options.seed,
         estimator=options.estimator, candidates=max(options.verify, 1),
         bev_candidates=options.bev_candidates, verified=options.verify > 0,
-        progress=self._stage, sampling=options.sampling, bev_banded=options.bev_banded)
+        progress=self._stage, sampling=options.sampling, bev_banded=options.bev_banded,
+        robust=options.robust_icp)
     try:
       reg, f1, f2 = run(levels)
     except ValueError as err:   # ISS keypoints that leave RANSAC nothing to sample

@@ -145,8 +145,8 @@ def _close(a: np.ndarray, b: np.ndarray, limits: tuple[float, float]) -> bool:
 
 def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
            memo: dict | None = None, confident_only: bool = False,
-           choose: Callable[[np.ndarray, np.ndarray], int] | None = None
-           ) -> tuple[int, np.ndarray, np.ndarray]:
+           choose: Callable[[np.ndarray, np.ndarray], int] | None = None,
+           robust: bool = False) -> tuple[int, np.ndarray, np.ndarray]:
   """Candidate poses T_12 [k, 4, 4] of cloud 2 in cloud 1 (points [N, 3] metres near the
   origin, z up, or their `target` and `source`) -> (index of the best, each candidate
   refined by ICP [k, 4, 4], their fitness [k]: the share of cloud 2's points that rise
@@ -162,7 +162,8 @@ def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
   CONFIDENT_FITNESS, none is refined in full (each keeps its coarse pose and fitness).
   `choose(poses [k, 4, 4], fitness [k]) -> index` picks the answer (default: the best
   fitness; e.g. the first of `free_space.ranked` instead); whichever it picks is refined
-  in full, and picked again from there."""
+  in full, and picked again from there. `robust`: every ICP with the robust kernel
+  (`icp.point_to_plane`), kept in `memo` apart from the plain ones."""
   tgt = points1 if isinstance(points1, icp.Surface) else target(points1)
   if isinstance(points2, Source):
     if score_on != SCORE_ON:
@@ -194,8 +195,9 @@ def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
     elif aligned and prescore[c] <= scores.max():
       scores[c] = score(candidates[c])
     else:
-      refined[c] = kept('coarse', candidates[c], lambda c=c: icp.point_to_plane(
-          tgt, src.coarse, candidates[c], ICP_DISTANCES[:1], COARSE_ITERATIONS)[0])
+      refined[c] = kept(('coarse', robust), candidates[c], lambda c=c: icp.point_to_plane(
+          tgt, src.coarse, candidates[c], ICP_DISTANCES[:1], COARSE_ITERATIONS,
+          robust=robust)[0])
       scores[c] = score(refined[c])
       aligned.append(c)
   if confident_only and scores.max() < CONFIDENT_FITNESS - UNREFINED_MARGIN:
@@ -203,8 +205,8 @@ def verify(points1, points2, candidates: np.ndarray, score_on: str = SCORE_ON,
   fine = set()
 
   def refine(c):   # in full, with every candidate that shares its coarse result
-    t = kept('fine', refined[c], lambda: icp.point_to_plane(
-        tgt, src.points, refined[c], ICP_DISTANCES, ICP_ITERATIONS)[0])
+    t = kept(('fine', robust), refined[c], lambda: icp.point_to_plane(
+        tgt, src.points, refined[c], ICP_DISTANCES, ICP_ITERATIONS, robust=robust)[0])
     fit = score(t)
     for d in np.flatnonzero(np.all(refined == refined[c], axis=(1, 2))):
       refined[d], scores[d] = t, fit
