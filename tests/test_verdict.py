@@ -9,7 +9,7 @@ from ssd_jax import geometry, inference, pretrained
 from ssd_jax.data import clean, groundtruth, io, kitti
 from ssd_jax.infra import errors
 from ssd_jax.registration import bev, cloud_features, free_space, metrics, outputs, pipeline
-from ssd_jax.registration import icp, keypoints, prepared
+from ssd_jax.registration import icp, keypoints, pair_stages, prepared
 from ssd_jax.registration import uncertainty, verdict, verification
 from ssd_jax.registration import options as options_lib
 from tests.conftest import shared_path
@@ -381,3 +381,26 @@ def test_a_refused_pose_is_registered_again_by_the_robust_icp(monkeypatch):
     assert not metrics.registration_errors(t12, refused.transform)['success']
   assert again.verdict.registered and metrics.registration_errors(t12, again.transform)['success']
   assert pipeline.RETRY_NOTES['robust'].format(first.verdict.reason) in again.notes
+
+
+@pytest.mark.real_data
+def test_a_trusted_pose_is_polished_by_the_robust_icp_only_where_still_trusted():
+  """A right pose moved 0.4 m and 1.5 degrees off (as the plain ICP drags a far pair's) is
+  brought back within 5 cm of the registered pose by `polish`, trusted; a pose 15 m off is
+  left as it is."""
+  cloud1, cloud2, _ = _drive_pair(0, 7)
+  reg, _, _ = pipeline.register(target=cloud1, source=cloud2,
+                                model=pretrained.load(pretrained.DEFAULT))
+  assert reg.verdict.registered
+  nudge = geometry.make_transform(geometry.rotation_z(np.radians(1.5)), np.array([0.4, 0, 0]))
+  off = dataclasses.replace(reg, transform=reg.transform @ nudge)
+  polished = pair_stages.polish(off, cloud1, cloud2)
+  assert polished.verdict.registered
+  error = lambda t: metrics.registration_errors(reg.transform, t)
+  assert error(off.transform)['rte'] > 0.3
+  assert error(polished.transform)['rte'] < 0.05 and error(polished.transform)['rre'] < 0.2
+  far = dataclasses.replace(reg, transform=geometry.make_transform(
+      np.eye(3), np.array([15.0, 0, 0])) @ reg.transform)
+  kept = pair_stages.polish(far, cloud1, cloud2)
+  np.testing.assert_array_equal(kept.transform, far.transform)
+  assert kept.seconds['icp'] > 0

@@ -1,6 +1,6 @@
 """Register two clouds, or a stream of pairs of cloud files (`Registrar`, `register_many`):
 grid -> level -> features, coarse to fine -> fallback to any rotation -> back in the
-clouds' frames -> ICP and assessment. The parts are their own modules: the options
+clouds' frames -> ICP, assessment and a trusted pose's polish. The parts are their own modules: the options
 (`options`), the per-cloud features (`cloud_features`), the per-pair stages
 (`pair_stages`), levelling (`leveling`).
 """
@@ -307,7 +307,8 @@ class Registrar:
     descriptor (a learned one with `model`, default the options' own; the clouds' levels
     kept under `key`, default the descriptor, made the first time they are asked for;
     ISS keypoints RANSAC cannot sample fall back to farthest-point ones), back in the
-    clouds' frames, ICP (`Options.icp`) and `assess` (`min_constraint` as there). The
+    clouds' frames, ICP (`Options.icp`), `assess` (`min_constraint` as there) and, where
+    the poses are verified and the verdict trusts the pose, `pair_stages.polish`. The
     levels' keypoint and descriptor seconds go to `seconds`."""
     key = key or options.descriptor
     for e in entries:
@@ -347,6 +348,9 @@ class Registrar:
       reg.seconds['icp'] = time.perf_counter() - t0
     reg = pair_stages.assess(reg, entries[0].own, entries[1].own, origin=-entries[0].offset,
                              min_constraint=min_constraint)
+    if options.verify > 0 and reg.verdict.registered:
+      reg = pair_stages.polish(reg, entries[0].own, entries[1].own, origin=-entries[0].offset,
+                               min_constraint=min_constraint)
     return reg, f1, f2
 
 
