@@ -11,8 +11,9 @@ on the 2-core AMD EPYC VM with the test suite sharing it, FPFH most of it):
         --workdir=runs/register_defaults
 
 Expected (2-core CPU VM): 100 % on all three sets (KITTI-style 106, push-broom 53, real
-re-scans 80) with every row, RTE 0.009 / 0.037 / 0.006 m, every pair ended at the coarse
-level and trusted; docs/notes/results.md has the table and RANSAC's best pose alone.
+re-scans 80) with every row, RTE 0.004 / 0.033 / 0.005 m, every pair ended at the coarse
+level, trusted and polished; docs/notes/results.md has the table and RANSAC's best pose
+alone.
 """
 
 from ssd_jax.configs.evals import evaluation
