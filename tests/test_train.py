@@ -210,7 +210,9 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
   half of the run. Medians of single steps: at batch 2 the loss is heavy-tailed (a hard
   batch whose CF rotation fails costs ~10x the median), so no single batch decides, while
   a run that stops learning still fails. The `example` clouds learn most of what 75 steps
-  teach in the first 10, so a window after step 5 would compare two trained networks."""
+  teach in the first 10, so a window after step 5 would compare two trained networks. The
+  tiny synthetic street starts lower (7.6 degrees untrained) and learns slower: 300 steps
+  there (at 75 its drop is 1-25 %, by machine and seed; at 300, 37 % on the 2-core VM)."""
   config = paper_small.get_config()
   config.progress_bar = False
   config.data.eval_path = ''
@@ -221,7 +223,7 @@ def test_short_training_lowers_loss_and_rotation_error(tmp_path, source):
     config.data.path = str(shared_path(*source))
   config.data.num_points = 1024
   config.model.num_clusters = 128
-  config.train.num_steps = 75
+  config.train.num_steps = 300 if source == 'synthetic' else 75
   config.train.log_every = 1
   config.train.checkpoint_every = config.train.num_steps
   train.train_and_evaluate(config, str(tmp_path / 'run'))
