@@ -129,7 +129,7 @@ def _increment(x: np.ndarray) -> np.ndarray:
 # sharing a fifth of their view pair most of cloud 2's points with a surface within 1 m that
 # is not theirs (a hedge before a wall, the far side of a street), and squared residuals let
 # those drag a right pose 17 degrees off on a real far pair; at a quarter of the distance a
-# residual of half of it weighs 0.04 (docs/notes/real_drives.md: the scales measured).
+# residual of half of it weighs 0.04 (docs/notes/real_drives.md: the robust ICP).
 ROBUST_SCALE = 0.25
 
 

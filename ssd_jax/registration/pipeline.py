@@ -1,8 +1,8 @@
 """Register two clouds, or a stream of pairs of cloud files (`Registrar`, `register_many`):
 grid -> level -> features, coarse to fine -> fallback to any rotation -> back in the
-clouds' frames -> ICP, assessment and a trusted pose's polish. The parts are their own modules: the options
-(`options`), the per-cloud features (`cloud_features`), the per-pair stages
-(`pair_stages`), levelling (`leveling`).
+clouds' frames -> ICP, assessment and a trusted pose's polish. The parts are their own
+modules: the options (`options`), the per-cloud features (`cloud_features`), the per-pair
+stages (`pair_stages`), levelling (`leveling`).
 """
 
 from __future__ import annotations
