@@ -1,9 +1,9 @@
 """The stages of one pair, as in Open3D's registration pipeline: descriptor matches and
 RANSAC (`estimate`), the candidate poses checked against the clouds (`verify`), both from
-coarse keypoints first (`coarse_to_fine`), ICP (`refine_icp`), and the pose's assessment
-(`assess`: its uncertainty and verdict). Each takes the clouds' features
-(`cloud_features`) so that an evaluation can cache them and only match and estimate per
-pair."""
+coarse keypoints first (`coarse_to_fine`), ICP (`refine_icp`), the pose's assessment
+(`assess`: its uncertainty and verdict) and a trusted pose's robust refinement (`polish`).
+Each takes the clouds' features (`cloud_features`) so that an evaluation can cache them and
+only match and estimate per pair."""
 
 from __future__ import annotations
 
@@ -245,8 +245,8 @@ def polish(reg: Registration, points1, points2=None, origin: np.ndarray | None =
   moved, _ = icp.point_to_plane(pair.cloud1.target, pair.cloud2.source.points,
                                 reg.transform, verification.ICP_DISTANCES,
                                 verification.ICP_ITERATIONS, robust=True)
-  spent = {**reg.seconds, 'icp': reg.seconds.get('icp', 0.0) + time.perf_counter() - t0}
-  again = assess(dataclasses.replace(reg, transform=moved, seconds=spent), pair, None,
+  timed = {**reg.seconds, 'icp': reg.seconds.get('icp', 0.0) + time.perf_counter() - t0}
+  again = assess(dataclasses.replace(reg, transform=moved, seconds=timed), pair, None,
                  origin, min_constraint)
   spent = {**again.seconds, 'assess': again.seconds['assess'] + reg.seconds['assess']}
   return dataclasses.replace(again if again.verdict.registered else reg, seconds=spent)
