@@ -179,12 +179,32 @@ def test_the_verdict_on_a_right_and_a_wrong_pose_of_real_scans():
   # Without the free-space check (clouds off their sensors' frames) the other reasons hold.
   no_viewpoint = prepared.PreparedPair(prepared.PreparedCloud(cloud1, viewpoint=False), cloud2)
   assert verdict.assess(no_viewpoint, t12).conflict is None
-  # The right pose as a distinct candidate fitting as well: ambiguous.
+  # A distinct candidate said to fit as well (3 m up; free space not judged, else it lies
+  # in scan 1's empty space) makes the right pose ambiguous; said to fit clearly less, not.
   twin = t12.copy()
-  twin[:3, 3] += [0.0, 0.0, 3.0]   # 3 m off: a distinct candidate
-  amb = verdict.assess(pair, t12, candidates=np.stack([t12, twin]),
-                       candidate_fitness=np.array([right.fitness, right.fitness]))
-  assert amb.runner_up is None or not amb.registered
+  twin[:3, 3] += [0.0, 0.0, 3.0]
+  for said, ambiguous in ((right.fitness, True), (right.fitness - 0.1, False)):
+    judged = verdict.assess(no_viewpoint, t12, candidates=np.stack([t12, twin]),
+                            candidate_fitness=np.array([right.fitness, said]))
+    assert (judged.kind == 'ambiguous candidates') == ambiguous, (said, judged)
+
+
+def test_a_pose_is_ambiguous_beside_a_distinct_candidate_that_fits_as_well():
+  """A row of 41 posts 5 m apart seen twice: the pose one post along fits within
+  AMBIGUOUS_MARGIN of the right one, two and a half posts along it does not."""
+  rng = np.random.default_rng(0)
+  posts = np.concatenate([np.c_[rng.uniform(-0.25, 0.25, (300, 2)) + [x, 0.0],
+                                rng.uniform(0.0, 3.0, 300)] for x in np.arange(-100, 101, 5)])
+  pair = prepared.PreparedPair(prepared.PreparedCloud(posts, viewpoint=False),
+                               prepared.PreparedCloud(posts + rng.normal(0, 0.02, posts.shape),
+                                                      viewpoint=False))
+  fit = lambda t: verification.fitness(pair.cloud1.target, pair.cloud2.source.scored, t)
+  for x, ambiguous in ((5.0, True), (12.5, False)):
+    candidates = np.stack([np.eye(4), geometry.make_transform(np.eye(3), np.array([x, 0, 0]))])
+    judged = verdict.assess(pair, np.eye(4), candidates=candidates,
+                            candidate_fitness=np.array([fit(t) for t in candidates]))
+    assert (judged.kind == 'ambiguous candidates') == ambiguous, (x, judged)
+  assert judged.registered and judged.fitness > 0.95
 
 
 
