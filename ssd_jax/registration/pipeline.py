@@ -273,8 +273,13 @@ class Registrar:
 
     if groundless and not self._options.verify:
       return any_rotation({})
-    pair = prepared.PreparedPair(entries[0].points, entries[1].points)   # one memo, both tries
-    reg, f1, f2 = self._upright(entries, pair, self._options, seconds, pair_name)
+    # One memo for every try: of the levelled clouds, and of the clouds as given (the
+    # assessments and polishes, which judge the same poses and candidates again); one and
+    # the same where neither cloud was turned.
+    pair = prepared.PreparedPair(entries[0].points, entries[1].points)
+    judged = (pair if all(e.points is e.own for e in entries)
+              else prepared.PreparedPair(entries[0].own, entries[1].own))
+    reg, f1, f2 = self._upright(entries, pair, judged, self._options, seconds, pair_name)
     if groundless:
       if not _settled(reg):
         return any_rotation(reg.seconds)
@@ -283,8 +288,8 @@ class Registrar:
       spent = collections.Counter(reg.seconds)   # every try's stages, as `any_rotation`'s
       tries = [(reg, f1, f2)]
       for name, (key, options, model) in self._retries.items():
-        again, g1, g2 = self._upright(entries, pair, options, seconds, pair_name, key, model,
-                                      verdict_lib.RETRY_MIN_CONSTRAINT)
+        again, g1, g2 = self._upright(entries, pair, judged, options, seconds, pair_name,
+                                      key, model, verdict_lib.RETRY_MIN_CONSTRAINT)
         spent.update(again.seconds)
         if again.verdict.registered:
           again.notes.append(RETRY_NOTES[name].format(reg.verdict.reason))
@@ -299,8 +304,8 @@ class Registrar:
     return reg, f1, f2
 
   def _upright(self, entries: list[_Cloud], pair: prepared.PreparedPair,
-               options: options_lib.Options, seconds: dict, pair_name: str,
-               key: str | None = None, model=None,
+               judged: prepared.PreparedPair, options: options_lib.Options, seconds: dict,
+               pair_name: str, key: str | None = None, model=None,
                min_constraint: float = uncertainty.MIN_CONSTRAINT
                ) -> tuple[pair_stages.Registration, Features, Features]:
     """The pair (`pair`: its levelled clouds) registered upright with `options`'
@@ -308,8 +313,9 @@ class Registrar:
     kept under `key`, default the descriptor, made the first time they are asked for;
     ISS keypoints RANSAC cannot sample fall back to farthest-point ones), back in the
     clouds' frames, ICP (`Options.icp`), `assess` (`min_constraint` as there) and, where
-    the poses are verified and the verdict trusts the pose, `pair_stages.polish`. The
-    levels' keypoint and descriptor seconds go to `seconds`."""
+    the poses are verified and the verdict trusts the pose, `pair_stages.polish`, both on
+    `judged` (the clouds as given). The levels' keypoint and descriptor seconds go to
+    `seconds`."""
     key = key or options.descriptor
     for e in entries:
       if key not in e.features:
@@ -346,10 +352,10 @@ class Registrar:
       reg.transform, reg.icp_fitness = pair_stages.refine_icp(
           entries[0].own.points, entries[1].own.points, reg.transform)
       reg.seconds['icp'] = time.perf_counter() - t0
-    reg = pair_stages.assess(reg, entries[0].own, entries[1].own, origin=-entries[0].offset,
+    reg = pair_stages.assess(reg, judged, origin=-entries[0].offset,
                              min_constraint=min_constraint)
     if options.verify > 0 and reg.verdict.registered:
-      reg = pair_stages.polish(reg, entries[0].own, entries[1].own, origin=-entries[0].offset,
+      reg = pair_stages.polish(reg, judged, origin=-entries[0].offset,
                                min_constraint=min_constraint)
     return reg, f1, f2
 
